@@ -1,0 +1,1 @@
+"""Benchmarks run by `corn-drake bench <what>`; one module per benchmark."""

@@ -1,0 +1,40 @@
+"""JSON reports for `corn-drake bench`: the figures plus the machine they were measured on."""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+from typing import Any
+
+from corn_drake.io_utils import write_json
+
+
+def machine_info() -> dict[str, Any]:
+    info: dict[str, Any] = {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu_count": os.cpu_count(),
+        "processor": platform.processor(),
+    }
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    info["cpu_model"] = line.split(":", 1)[1].strip()
+                    break
+        info["load_average_at_start"] = os.getloadavg()
+    except OSError:
+        pass
+    return info
+
+
+def write_report(path: str, name: str, results: dict[str, Any]) -> dict[str, Any]:
+    report = {
+        "benchmark": name,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "machine": machine_info(),
+        "results": results,
+    }
+    write_json(path, report)
+    return report

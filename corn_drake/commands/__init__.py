@@ -1,0 +1,1 @@
+"""One module per `corn-drake` subcommand (see corn_drake/cli.py)."""
