@@ -1,0 +1,141 @@
+"""Typed configs for the diagrams in diagrams/*.yaml, loaded with pydrake's yaml_load_typed.
+
+Unknown keys are an error (yaml_load_typed's default), reported with the file's path.
+Numbers default to the paper's / official code's values (see ../shared/DESIGN.md spec sheet).
+No `from __future__ import annotations` here: yaml_load_typed needs real types on the fields.
+"""
+
+
+import dataclasses as dc
+from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+@dc.dataclass
+class PhysicsConfig:
+    # 80 Hz physics / 10 Hz policy as in the paper; tests/test_scene_physics.py checks resting
+    # and pushing stability at this step.
+    time_step: float = 0.0125
+    policy_period: float = 0.1
+    discrete_contact_approximation: str = "sap"
+    contact_model: str = "hydroelastic_with_fallback"
+    # Compliant-hydroelastic object on a rigid table. 1e7 Pa blew up at 12.5 ms in probes;
+    # 1e6 kicked a resting box 2.5 mm / 0.014 rad on its first step here; 1e5 sinks 0.2 mm and
+    # stays put (tests/test_scene_physics.py).
+    object_hydroelastic_modulus: float = 1.0e5
+    object_hunt_crossley_dissipation: float = 5.0
+    # Reflected rotor inertia and damping from the authors' system identification.
+    armature: list[float] = dc.field(
+        default_factory=lambda: [0.192, 0.54, 0.128, 0.172, 0.15, 0.08, 0.06])
+    gravity_on_robot: bool = False
+
+
+@dc.dataclass
+class ObjectConfig:
+    # "box" | "cylinder": a primitive built in code; "library": an object from a library folder.
+    kind: str = "box"
+    size: list[float] = dc.field(default_factory=lambda: [0.09, 0.07, 0.05])  # box x,y,z
+    radius: float = 0.04  # cylinder radius
+    length: float = 0.08  # cylinder length
+    library: str = ""  # folder holding manifest.json (kind: library)
+    object_id: str = ""  # id in that manifest
+    mass: float = 0.3
+    cloud_points: int = 512
+
+
+@dc.dataclass
+class RandomizationConfig:
+    enabled: bool = True
+    mass: list[float] = dc.field(default_factory=lambda: [0.1, 0.5])
+    # Object radius after scaling (m); [0, 0] keeps the object's own size.
+    object_radius: list[float] = dc.field(default_factory=lambda: [0.0, 0.0])
+    object_friction: list[float] = dc.field(default_factory=lambda: [0.7, 1.0])
+    table_friction: list[float] = dc.field(default_factory=lambda: [0.3, 0.8])
+    finger_friction: list[float] = dc.field(default_factory=lambda: [1.0, 1.5])
+    # Drake's SAP contact is inelastic: restitution is sampled and reported to the policy as in
+    # the paper but has no physical effect here.
+    restitution: list[float] = dc.field(default_factory=lambda: [0.0, 0.2])
+    # Std of N(0, s) joint-torque noise (N m) per physics step. The authors add it only for the
+    # student / phase-2 fine-tuning, so the teacher diagram sets 0.
+    torque_noise_std: float = 0.0
+
+
+@dc.dataclass
+class ControllerConfig:
+    max_position_delta: float = 0.06  # m, residual EE translation at |a| = 1
+    max_rotation_delta: float = 0.1  # rad, residual axis-angle at |a| = 1
+    kp_range: list[float] = dc.field(default_factory=lambda: [10.0, 200.0])
+    rho_range: list[float] = dc.field(default_factory=lambda: [0.1, 2.0])
+    ik_damping: float = 0.01  # dq = J^T (J J^T + ik_damping I)^-1 e
+    ee_clamp: float = 0.1  # target within +- this of the current EE position
+    object_margin: float = 0.2  # target within object position +- (radius + margin)
+    effort_limits: list[float] = dc.field(
+        default_factory=lambda: [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
+
+
+@dc.dataclass
+class TaskConfig:
+    episode_steps: int = 300
+    success_position: float = 0.05  # planar xy error, m
+    success_orientation: float = 0.1  # rad
+    min_goal_distance: float = 0.055
+    goal_x: list[float] = dc.field(default_factory=lambda: [-0.16, 0.16])
+    goal_y: list[float] = dc.field(default_factory=lambda: [-0.2, 0.2])
+    object_min_distance_to_hand: float = 0.12
+    # Object centre outside this box ends the episode (official workspace bounds).
+    workspace_low: list[float] = dc.field(default_factory=lambda: [-0.5, -0.55, 0.2])
+    workspace_high: list[float] = dc.field(default_factory=lambda: [0.5, 0.55, 0.9])
+    robot_init_low: list[float] = dc.field(
+        default_factory=lambda: [-0.3, -0.4636, -0.2, -2.7432, -0.3335, 1.5269, -1.5707963])
+    robot_init_high: list[float] = dc.field(
+        default_factory=lambda: [0.3, 0.5432, 0.2, -1.5237, 0.3335, 2.5744, 1.5707963])
+    robot_init_noise: float = 0.03
+    # Reward (potential-based, official code): k1 * 0.995^(k2 * dist).
+    keypoint_k1: float = 0.302
+    keypoint_k2: float = 243.12
+    hand_k1: float = 0.0604
+    hand_clip: float = 0.5
+    potential_gamma: float = 0.995
+    success_reward: float = 1.0
+    energy_coef: float = 1.0e-4
+
+
+@dc.dataclass
+class SceneConfig:
+    physics: PhysicsConfig = dc.field(default_factory=PhysicsConfig)
+    object: ObjectConfig = dc.field(default_factory=ObjectConfig)
+    table_size: list[float] = dc.field(default_factory=lambda: [0.4, 0.5, 0.4])
+    robot_base: list[float] = dc.field(default_factory=lambda: [-0.5, 0.0, 0.4])
+
+
+@dc.dataclass
+class TeacherDiagramConfig:
+    scene: SceneConfig = dc.field(default_factory=SceneConfig)
+    randomization: RandomizationConfig = dc.field(default_factory=RandomizationConfig)
+    controller: ControllerConfig = dc.field(default_factory=ControllerConfig)
+    task: TaskConfig = dc.field(default_factory=TaskConfig)
+    seed: int = 0
+
+
+def load_config(path: str | Path, schema: type[T]) -> T:
+    """Loads a YAML file into `schema`; unknown keys or bad values raise naming the file."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"config file not found: {path}")
+    try:
+        return yaml_load_typed(schema=schema, filename=str(path))
+    except RuntimeError as e:
+        raise ValueError(f"invalid config {path}: {e}") from e
+
+
+def load_config_string(text: str, schema: type[T], name: str = "<string>") -> T:
+    from pydrake.common.yaml import yaml_load_typed
+
+    try:
+        return yaml_load_typed(schema=schema, data=text)
+    except RuntimeError as e:
+        raise ValueError(f"invalid config {name}: {e}") from e

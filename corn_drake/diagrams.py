@@ -1,0 +1,144 @@
+"""Builders that turn the typed YAML configs in diagrams/ into Drake Diagrams.
+
+Teacher diagram: plant + scene graph, ActionToJointTargets -> VariableImpedanceController ->
+plant, TeacherObservations and TaskReward, with the per-episode quantities (goal pose, physics
+parameters, object cloud, keypoints and radius) held as ConstantVectorSource parameters in the
+context, so reset re-randomizes without rebuilding anything.
+
+Exported ports: input `controller.action`; outputs `obs.<key>` for each observation key,
+`task.reward`, `task.status`, `plant.object_state`, `plant.robot_state`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+from pydrake.common import RandomDistribution
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, RandomSource
+
+from corn_drake import DIAGRAMS_DIR
+from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
+from corn_drake.scene.builder import Scene, build_scene
+from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
+from corn_drake.systems.ik import ActionToJointTargets
+from corn_drake.systems.impedance_controller import VariableImpedanceController
+from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
+from corn_drake.systems.reward import TaskReward
+
+
+@dataclasses.dataclass
+class TeacherDiagram:
+    diagram: Diagram
+    scene: Scene
+    ik: ActionToJointTargets
+    controller: VariableImpedanceController
+    observations: TeacherObservations
+    reward: TaskReward
+    # Per-episode parameter sources, keyed by name (goal_pose, physics_params, object_cloud,
+    # object_keypoints, object_radius).
+    sources: dict[str, ConstantVectorSource]
+    config: TeacherDiagramConfig
+    cloud_indices: np.ndarray  # which rows of the object's cloud the observation uses
+
+
+def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
+    if cfg.kind == "box":
+        return box_spec(cfg.size, cfg.mass, seed=seed)
+    if cfg.kind == "cylinder":
+        return cylinder_spec(cfg.radius, cfg.length, cfg.mass, seed=seed)
+    if cfg.kind == "library":
+        from corn_drake.assets.library import load_object_spec
+
+        return load_object_spec(cfg.library, cfg.object_id)
+    raise ValueError(f"object.kind must be box, cylinder or library, got {cfg.kind!r}")
+
+
+def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:
+    return load_config(path or DIAGRAMS_DIR / "teacher_rollout.yaml", TeacherDiagramConfig)
+
+
+def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
+                        spec: ObjectSpec | None = None) -> TeacherDiagram:
+    """Adds the teacher scene and systems to `builder` (for diagrams that add more systems)."""
+    spec = spec or object_spec_from_config(cfg.scene.object, cfg.seed)
+    scene = build_scene(builder, cfg.scene, spec)
+    plant, physics = scene.plant, cfg.scene.physics
+    n_pts = cfg.scene.object.cloud_points
+    # A fixed subset of the object's surface samples: the cloud moves rigidly with the object,
+    # so patch indices can be computed once per object downstream.
+    cloud_indices = np.random.default_rng(cfg.seed).choice(len(spec.cloud), n_pts,
+                                                           replace=len(spec.cloud) < n_pts)
+
+    def source(name, value):
+        s = builder.AddNamedSystem(name, ConstantVectorSource(np.asarray(value, float)))
+        return s
+
+    sources = {
+        "goal_pose": source("goal_pose", spec.stable_poses[0]),
+        "physics_params": source("physics_params", np.zeros(5)),
+        "object_cloud": source("object_cloud", spec.cloud[cloud_indices, :3].reshape(-1)),
+        "object_keypoints": source("object_keypoints", spec.bbox_corners.reshape(-1)),
+        "object_radius": source("object_radius", [spec.radius]),
+    }
+    robot_state = plant.get_state_output_port(scene.panda)
+    object_state = plant.get_state_output_port(scene.object_instance)
+
+    ik = builder.AddNamedSystem("ik", ActionToJointTargets(
+        cfg.controller, physics.policy_period, np.asarray(cfg.scene.robot_base), physics.armature))
+    with_noise = cfg.randomization.torque_noise_std > 0
+    ctrl = builder.AddNamedSystem("controller", VariableImpedanceController(
+        cfg.controller.effort_limits, physics.time_step, with_noise=with_noise))
+    builder.Connect(robot_state, ik.GetInputPort("robot_state"))
+    builder.Connect(object_state, ik.GetInputPort("object_state"))
+    builder.Connect(sources["object_radius"].get_output_port(), ik.GetInputPort("object_radius"))
+    builder.Connect(robot_state, ctrl.GetInputPort("robot_state"))
+    builder.Connect(ik.GetOutputPort("q_target"), ctrl.GetInputPort("q_target"))
+    builder.Connect(ik.GetOutputPort("gains"), ctrl.GetInputPort("gains"))
+    builder.Connect(ctrl.GetOutputPort("actuation"), plant.get_actuation_input_port(scene.panda))
+    if with_noise:
+        noise = builder.AddNamedSystem("torque_noise", RandomSource(
+            RandomDistribution.kGaussian, 7, physics.time_step))
+        builder.Connect(noise.get_output_port(), ctrl.GetInputPort("unit_noise"))
+
+    obs = builder.AddNamedSystem("observations", TeacherObservations(n_pts, cfg.scene.robot_base))
+    builder.Connect(robot_state, obs.GetInputPort("robot_state"))
+    builder.Connect(object_state, obs.GetInputPort("object_state"))
+    builder.Connect(ik.GetOutputPort("previous_action"), obs.GetInputPort("previous_action"))
+    for name in ("goal_pose", "physics_params", "object_cloud"):
+        builder.Connect(sources[name].get_output_port(), obs.GetInputPort(name))
+
+    reward = builder.AddNamedSystem("task", TaskReward(cfg.task, physics.policy_period))
+    builder.Connect(object_state, reward.GetInputPort("object_state"))
+    builder.Connect(obs.GetOutputPort("hand_state"), reward.GetInputPort("hand_state"))
+    builder.Connect(sources["goal_pose"].get_output_port(), reward.GetInputPort("goal_pose"))
+    builder.Connect(sources["object_keypoints"].get_output_port(),
+                    reward.GetInputPort("object_keypoints"))
+    builder.Connect(ctrl.GetOutputPort("energy"), reward.GetInputPort("energy"))
+
+    builder.ExportOutput(robot_state, "plant.robot_state")
+    builder.ExportOutput(object_state, "plant.object_state")
+    for key in OBS_KEYS:
+        builder.ExportOutput(obs.GetOutputPort(key), f"obs.{key}")
+    builder.ExportOutput(reward.GetOutputPort("reward"), "task.reward")
+    builder.ExportOutput(reward.GetOutputPort("task_status"), "task.status")
+    return TeacherDiagram(diagram=None, scene=scene, ik=ik, controller=ctrl, observations=obs,
+                          reward=reward, sources=sources, config=cfg, cloud_indices=cloud_indices)
+
+
+def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
+                          meshcat=None) -> TeacherDiagram:
+    """The teacher rollout diagram; the action is the exported input `controller.action`."""
+    cfg = cfg or load_teacher_config()
+    builder = DiagramBuilder()
+    handles = add_teacher_systems(builder, cfg, spec)
+    builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
+    if meshcat is not None:
+        from corn_drake.viz.meshcat import add_meshcat_visualizer
+
+        add_meshcat_visualizer(builder, handles.scene.scene_graph, meshcat)
+    handles.diagram = builder.Build()
+    handles.diagram.set_name("teacher_rollout")
+    return handles

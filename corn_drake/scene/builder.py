@@ -1,0 +1,128 @@
+"""The scene: MultibodyPlant + SceneGraph with the Panda, the table and one free object."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMaterial,
+                              AddRigidHydroelasticProperties, Box, CollisionFilterDeclaration,
+                              Convex, Cylinder, GeometryId, GeometrySet, ProximityProperties,
+                              SceneGraph)
+from pydrake.math import RigidTransform
+from pydrake.multibody.math import SpatialVelocity  # noqa: F401  (re-exported for users)
+from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction, MultibodyPlant,
+                                     MultibodyPlantConfig)
+from pydrake.multibody.tree import ModelInstanceIndex, RigidBody, SpatialInertia, UnitInertia
+from pydrake.systems.framework import DiagramBuilder
+
+from corn_drake.config import SceneConfig
+from corn_drake.scene.franka import FINGER_BODIES, add_franka
+from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
+
+OBJECT_NAME = "object"
+TABLE_NAME = "table"
+DEFAULT_TABLE_FRICTION = 0.5
+DEFAULT_OBJECT_FRICTION = 0.8
+
+
+@dataclasses.dataclass
+class Scene:
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    panda: ModelInstanceIndex
+    object_instance: ModelInstanceIndex
+    object_body: RigidBody
+    object_spec: ObjectSpec
+    object_geometries: list[GeometryId]
+    table_geometries: list[GeometryId]
+    finger_geometries: list[GeometryId]
+    robot_geometries: list[GeometryId]
+    config: SceneConfig
+
+
+def friction_properties(mu: float) -> ProximityProperties:
+    props = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
+    return props
+
+
+def object_proximity_properties(cfg: SceneConfig, mu: float) -> ProximityProperties:
+    props = ProximityProperties()
+    AddContactMaterial(dissipation=cfg.physics.object_hunt_crossley_dissipation,
+                       friction=CoulombFriction(mu, mu), properties=props)
+    # Compliant hulls against the rigid table: a resting box gets a contact patch instead of a
+    # single rocking point (measured: point contact rocked 0.09 rad in 1 s).
+    AddCompliantHydroelasticProperties(resolution_hint=0.01,
+                                       hydroelastic_modulus=cfg.physics.object_hydroelastic_modulus,
+                                       properties=props)
+    return props
+
+
+def object_shapes(spec: ObjectSpec, scale: float = 1.0):
+    if spec.primitive is not None:
+        kind, dims = spec.primitive
+        if kind == "box":
+            return [Box(*(scale * np.asarray(dims)))]
+        if kind == "cylinder":
+            return [Cylinder(scale * dims[0], scale * dims[1])]
+        raise ValueError(f"object {spec.name}: unknown primitive {kind!r}")
+    return [Convex(str(p), scale) for p in spec.hull_paths]
+
+
+def _add_table(plant: MultibodyPlant, size) -> list[GeometryId]:
+    size = np.asarray(size, float)
+    X = RigidTransform([0.0, 0.0, TABLE_TOP_Z - size[2] / 2])
+    props = friction_properties(DEFAULT_TABLE_FRICTION)
+    AddRigidHydroelasticProperties(props)
+    shape = Box(*size)
+    gid = plant.RegisterCollisionGeometry(plant.world_body(), X, shape, TABLE_NAME, props)
+    plant.RegisterVisualGeometry(plant.world_body(), X, shape, TABLE_NAME, [0.55, 0.4, 0.3, 1.0])
+    return [gid]
+
+
+def _add_object(plant: MultibodyPlant, cfg: SceneConfig, spec: ObjectSpec):
+    instance = plant.AddModelInstance(OBJECT_NAME)
+    inertia = SpatialInertia(spec.mass, spec.com, UnitInertia(*np.diag(spec.unit_inertia),
+                                                               *spec.unit_inertia[[0, 0, 1], [1, 2, 2]]))
+    body = plant.AddRigidBody(OBJECT_NAME, instance, inertia)
+    props = object_proximity_properties(cfg, DEFAULT_OBJECT_FRICTION)
+    gids = []
+    for i, shape in enumerate(object_shapes(spec)):
+        gids.append(plant.RegisterCollisionGeometry(body, RigidTransform(), shape,
+                                                    f"{OBJECT_NAME}_hull{i}", props))
+    visual = Convex(str(spec.visual_path)) if spec.visual_path else None
+    for i, shape in enumerate([visual] if visual else object_shapes(spec)):
+        plant.RegisterVisualGeometry(body, RigidTransform(), shape, f"{OBJECT_NAME}_visual{i}",
+                                     [0.2, 0.5, 0.85, 1.0])
+    return instance, body, gids
+
+
+def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> Scene:
+    """Adds plant + scene graph to `builder`; the plant is finalized on return."""
+    plant_config = MultibodyPlantConfig(
+        time_step=cfg.physics.time_step,
+        discrete_contact_approximation=cfg.physics.discrete_contact_approximation,
+        contact_model=cfg.physics.contact_model)
+    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    panda = add_franka(plant, RigidTransform(cfg.robot_base), cfg.physics.armature)
+    if not cfg.physics.gravity_on_robot:
+        # As in the paper's simulation: the torque law has no gravity term.
+        plant.set_gravity_enabled(panda, False)
+    table_gids = _add_table(plant, cfg.table_size)
+    instance, body, object_gids = _add_object(plant, cfg, spec)
+    plant.Finalize()
+
+    inspector = scene_graph.model_inspector()
+    robot_gids = [g for b in plant.GetBodyIndices(panda)
+                  for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))]
+    finger_gids = [g for name in FINGER_BODIES
+                   for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName(name, panda))]
+    # The arm never needs to collide with itself; skipping those pairs saves contact queries.
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_gids)))
+    del inspector
+    return Scene(plant=plant, scene_graph=scene_graph, panda=panda, object_instance=instance,
+                 object_body=body, object_spec=spec, object_geometries=object_gids,
+                 table_geometries=table_gids, finger_geometries=finger_gids,
+                 robot_geometries=robot_gids, config=cfg)

@@ -1,0 +1,35 @@
+"""Small numpy pose helpers shared by systems, envs and datasets."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rot6d(R: np.ndarray) -> np.ndarray:
+    """6D rotation: the first two columns of R, column after column (6,)."""
+    return np.concatenate([R[:, 0], R[:, 1]])
+
+
+def pose9(p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Position + 6D rotation (9,): the hand-state / relative-goal encoding of the paper."""
+    return np.concatenate([p, rot6d(R)])
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """Angle (rad) of a rotation matrix, robust near 0 and pi."""
+    c = (np.trace(R) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def yaw_matrix(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
