@@ -23,6 +23,7 @@ from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
+from corn_drake.systems.energy_meter import add_energy_meter
 from corn_drake.systems.ik import ActionToJointTargets
 from corn_drake.systems.impedance_controller import VariableImpedanceController
 from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
@@ -90,7 +91,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
         cfg.controller, physics.policy_period, np.asarray(cfg.scene.robot_base), physics.armature))
     with_noise = cfg.randomization.torque_noise_std > 0
     ctrl = builder.AddNamedSystem("controller", VariableImpedanceController(
-        cfg.controller.effort_limits, physics.time_step, with_noise=with_noise))
+        cfg.controller.effort_limits, with_noise=with_noise))
     builder.Connect(robot_state, ik.GetInputPort("robot_state"))
     builder.Connect(object_state, ik.GetInputPort("object_state"))
     builder.Connect(sources["object_radius"].get_output_port(), ik.GetInputPort("object_radius"))
@@ -116,7 +117,10 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     builder.Connect(sources["goal_pose"].get_output_port(), reward.GetInputPort("goal_pose"))
     builder.Connect(sources["object_keypoints"].get_output_port(),
                     reward.GetInputPort("object_keypoints"))
-    builder.Connect(ctrl.GetOutputPort("energy"), reward.GetInputPort("energy"))
+    energy, energy_meter = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
+                                            robot_state,
+                                            physics.time_step)
+    builder.Connect(energy, reward.GetInputPort("energy"))
 
     builder.ExportOutput(robot_state, "plant.robot_state")
     builder.ExportOutput(object_state, "plant.object_state")

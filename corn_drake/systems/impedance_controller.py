@@ -4,8 +4,8 @@ tau = kp * (q_target - q) - kd * qdot (+ optional torque noise), clamped to the 
 with kd = rho * sqrt(kp) supplied by ActionToJointTargets. There is no gravity term: the robot's
 gravity is disabled in the plant, as in the paper's simulation.
 
-It also integrates the actuation energy sum |tau * qdot| over physics steps in a discrete state
-(the reward's energy penalty is the increase over one policy step).
+This is the only Python code that runs at every physics step; the energy bookkeeping the reward
+needs is done by C++ primitives (systems/energy_meter.py).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from corn_drake.scene.franka import NUM_JOINTS
 
 
 class VariableImpedanceController(LeafSystem):
-    def __init__(self, effort_limits, time_step: float, with_noise: bool = False):
+    def __init__(self, effort_limits, with_noise: bool = False):
         super().__init__()
         n = NUM_JOINTS
         self._limits = np.asarray(effort_limits, float)
@@ -32,9 +32,6 @@ class VariableImpedanceController(LeafSystem):
         # Noise std (N m) is a numeric parameter so domain randomization can set it per episode.
         self._noise_param = self.DeclareNumericParameter(BasicVector([0.0]))
         self.DeclareVectorOutputPort("actuation", n, self._calc_tau)
-        self._energy = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._accumulate_energy)
-        self.DeclareStateOutputPort("energy", self._energy)
 
     def set_noise_std(self, context, std: float) -> None:
         if std > 0 and not self._with_noise:
@@ -53,10 +50,3 @@ class VariableImpedanceController(LeafSystem):
 
     def _calc_tau(self, context, output: BasicVector):
         output.SetFromVector(self.torque(context))
-
-    def _accumulate_energy(self, context, discrete_state):
-        qdot = self.get_input_port(0).Eval(context)[NUM_JOINTS:]
-        e = context.get_discrete_state(self._energy).GetAtIndex(0)
-        # tau is a cached output: evaluated once per step for the plant and reused here.
-        tau = self.get_output_port(0).Eval(context)
-        discrete_state.set_value(self._energy, [e + float(np.abs(tau * qdot).sum())])
