@@ -1,0 +1,63 @@
+"""A scripted pushing controller: waypoints for the tool, turned into normalised actions.
+
+Used by the notebooks, tests and demos to exercise the controller without a learned policy:
+go above a point behind the object, descend, then push through the object along a direction,
+with fixed gains and the gripper pointing down.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from corn_drake.config import ControllerConfig
+from corn_drake.scene.objects import TABLE_TOP_Z
+
+# Tool frame pointing down (tool z = world -z), fingers spanning world y.
+R_DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def _log_so3(R: np.ndarray) -> np.ndarray:
+    angle = np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))
+    if angle < 1e-9:
+        return np.zeros(3)
+    if np.pi - angle < 1e-6:  # axis from the symmetric part near pi
+        axis = np.sqrt(np.maximum((np.diag(R) + 1) / 2, 0.0))
+        i = int(np.argmax(axis))
+        axis[np.arange(3) != i] = R[i, np.arange(3) != i] / (2 * axis[i])
+        return angle * axis / np.linalg.norm(axis)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return angle * w / (2 * np.sin(angle))
+
+
+def action_towards(tool_p: np.ndarray, tool_R: np.ndarray, target_p: np.ndarray,
+                   cfg: ControllerConfig, kp: float = 120.0, rho: float = 1.0,
+                   target_R: np.ndarray = R_DOWN) -> np.ndarray:
+    """Normalised 20-D action moving the tool towards target_p / target_R with fixed gains."""
+    dp = np.clip((target_p - tool_p) / cfg.max_position_delta, -1, 1)
+    dr = np.clip(_log_so3(target_R @ tool_R.T) / cfg.max_rotation_delta, -1, 1)
+    kp_n = (kp - np.mean(cfg.kp_range)) / (np.ptp(cfg.kp_range) / 2)
+    rho_n = (rho - np.mean(cfg.rho_range)) / (np.ptp(cfg.rho_range) / 2)
+    return np.concatenate([dp, dr, np.full(7, kp_n), np.full(7, rho_n)])
+
+
+class ScriptedPush:
+    """Stateful push: pre-push pose behind the object, descend, push `distance` along `direction`."""
+
+    def __init__(self, cfg: ControllerConfig, object_xy, direction_xy, distance: float = 0.15,
+                 height: float = 0.025, standoff: float = 0.1, tolerance: float = 0.015):
+        d = np.asarray(direction_xy, float)
+        d = d / np.linalg.norm(d)
+        start = np.asarray(object_xy, float) - standoff * d
+        end = np.asarray(object_xy, float) + distance * d
+        z = TABLE_TOP_Z + height
+        self.waypoints = [np.array([*start, z + 0.12]), np.array([*start, z]), np.array([*end, z])]
+        self.cfg, self.tolerance, self.index = cfg, tolerance, 0
+
+    def __call__(self, hand_state: np.ndarray) -> np.ndarray:
+        p = hand_state[:3]
+        R = np.column_stack([hand_state[3:6], hand_state[6:9],
+                             np.cross(hand_state[3:6], hand_state[6:9])])
+        if (self.index < len(self.waypoints) - 1
+                and np.linalg.norm(self.waypoints[self.index] - p) < self.tolerance):
+            self.index += 1
+        return action_towards(p, R, self.waypoints[self.index], self.cfg)

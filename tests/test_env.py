@@ -1,0 +1,109 @@
+"""TeacherEnv: observation layout, reset re-randomization, bad input, termination."""
+
+import numpy as np
+import pytest
+
+from corn_drake.config import TeacherDiagramConfig, load_config, load_config_string
+from corn_drake.rl.env import TeacherEnv
+from corn_drake.scene.objects import ObjectSpec, box_spec
+
+EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
+                   "previous_action": (20,), "goal": (9,), "physics": (5,)}
+
+
+@pytest.fixture(scope="module")
+def env():
+    return TeacherEnv()
+
+
+def test_observation_keys_shapes_and_contents(env):
+    obs, info = env.reset(seed=0)
+    assert {k: v.shape for k, v in obs.items()} == EXPECTED_SHAPES
+    assert all(np.isfinite(v).all() for v in obs.values())
+    assert env.observation_space.contains(obs)
+    # The cloud is the object's surface sample at its current pose: centred on the object.
+    p0 = env.episode_info["initial_object_pose"][:3]
+    assert np.linalg.norm(obs["cloud"].mean(0) - p0) < 0.02
+    # Goal is relative: goal position minus object position.
+    np.testing.assert_allclose(obs["goal"][:3], env.episode_info["goal_pose"][:3] - p0, atol=1e-5)
+    np.testing.assert_allclose(obs["physics"], env.episode_info["physics"].as_observation(), rtol=1e-6)
+    assert np.all(obs["previous_action"] == 0)
+    # Hand-state rotation columns are orthonormal.
+    c0, c1 = obs["hand_state"][3:6], obs["hand_state"][6:9]
+    assert abs(np.linalg.norm(c0) - 1) < 1e-5 and abs(c0 @ c1) < 1e-5
+    obs, reward, terminated, truncated, info = env.step(np.zeros(20))
+    assert np.isfinite(reward) and not truncated
+    # previous_action reports the physical action (zero action = mid-range gains).
+    np.testing.assert_allclose(obs["previous_action"][6:13], 105.0)
+
+
+def test_reset_rerandomizes_without_rebuilding(env):
+    diagram = env.diagram
+    samples = []
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        samples.append((env.episode_info["physics"], env.episode_info["initial_object_pose"],
+                        env.episode_info["goal_pose"]))
+    assert env.diagram is diagram
+    (a, pa, ga), (b, pb, gb) = samples
+    assert a.mass != b.mass and a.table_friction != b.table_friction
+    assert not np.allclose(pa, pb) and not np.allclose(ga, gb)
+    for phys in (a, b):
+        assert 0.1 <= phys.mass <= 0.5 and 0.3 <= phys.table_friction <= 0.8
+        assert 1.0 <= phys.finger_friction <= 1.5 and 0.7 <= phys.object_friction <= 1.0
+    # Same seed, same episode.
+    env.reset(seed=1)
+    np.testing.assert_allclose(env.episode_info["initial_object_pose"], pa)
+    # The goal is at least 5.5 cm from the start and the mass is in the plant context.
+    assert np.linalg.norm(pa[:2] - ga[:2]) >= 0.055
+    ctx = env.scene.plant.GetMyContextFromRoot(env.context)
+    assert env.scene.object_body.get_mass(ctx) == pytest.approx(a.mass)
+
+
+def test_nan_action_raises_and_does_not_poison_the_state(env):
+    env.reset(seed=4)
+    env.step(np.zeros(20))
+    t, x = env.context.get_time(), env.scene.plant.GetPositionsAndVelocities(env._plant_context).copy()
+    with pytest.raises(ValueError, match="non-finite"):
+        env.step(np.full(20, np.nan))
+    assert env.context.get_time() == t
+    np.testing.assert_array_equal(env.scene.plant.GetPositionsAndVelocities(env._plant_context), x)
+    obs, *_ = env.step(np.zeros(20))
+    assert all(np.isfinite(v).all() for v in obs.values())
+
+
+def test_episode_truncates_at_the_step_limit():
+    cfg = TeacherDiagramConfig()
+    cfg.task.episode_steps = 5
+    env = TeacherEnv(cfg)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(20))[3] for _ in range(5)]
+    assert flags == [False] * 4 + [True]
+
+
+def test_object_leaving_the_workspace_terminates(env):
+    env.reset(seed=0)
+    plant = env.scene.plant
+    from pydrake.math import RigidTransform
+    plant.SetFreeBodyPose(env._plant_context, env.scene.object_body, RigidTransform([0.0, 0.0, 0.1]))
+    _, _, terminated, _, info = env.step(np.zeros(20))
+    assert terminated and info["status"]["out_of_workspace"] == 1.0
+
+
+def test_unknown_config_key_is_named(tmp_path):
+    bad = tmp_path / "teacher.yaml"
+    bad.write_text("scene:\n  physics:\n    time_stepp: 0.01\n")
+    with pytest.raises(ValueError, match="time_stepp"):
+        load_config(bad, TeacherDiagramConfig)
+    with pytest.raises(FileNotFoundError, match="nowhere.yaml"):
+        load_config(tmp_path / "nowhere.yaml", TeacherDiagramConfig)
+    with pytest.raises(ValueError, match="bogus"):
+        load_config_string("bogus: 1", TeacherDiagramConfig)
+
+
+def test_missing_mesh_path_is_named(tmp_path):
+    base = box_spec([0.05, 0.05, 0.05], 0.2)
+    with pytest.raises(FileNotFoundError, match="hull7.obj"):
+        ObjectSpec(name="x", mass=0.2, unit_inertia=base.unit_inertia, com=base.com,
+                   cloud=base.cloud, stable_poses=base.stable_poses, radius=base.radius,
+                   bbox_corners=base.bbox_corners, hull_paths=[tmp_path / "hull7.obj"])

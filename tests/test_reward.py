@@ -1,0 +1,76 @@
+"""TaskReward on hand-made states: potentials, success bonus, energy penalty, workspace flag."""
+
+import numpy as np
+import pytest
+
+from corn_drake.config import TaskConfig
+from corn_drake.systems.reward import TaskReward, keypoint_potential
+from corn_drake.transforms import yaw_matrix
+
+CORNERS = np.array([[sx, sy, sz] for sx in (-.05, .05) for sy in (-.04, .04) for sz in (-.03, .03)])
+IDENTITY_Q = np.array([1.0, 0, 0, 0])
+
+
+def _state(p, yaw=0.0):
+    return np.concatenate([[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], p, np.zeros(6)])
+
+
+def _context(reward, obj, goal, tool, energy):
+    ctx = reward.CreateDefaultContext()
+    reward.GetInputPort("object_state").FixValue(ctx, obj)
+    reward.GetInputPort("hand_state").FixValue(ctx, np.concatenate([tool, np.zeros(6)]))
+    reward.GetInputPort("goal_pose").FixValue(ctx, goal)
+    reward.GetInputPort("object_keypoints").FixValue(ctx, CORNERS.reshape(-1))
+    reward.GetInputPort("energy").FixValue(ctx, [energy])
+    return ctx
+
+
+def test_success_and_errors_at_and_near_the_goal():
+    cfg = TaskConfig()
+    r = TaskReward(cfg, 0.1)
+    goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
+    at_goal = _context(r, _state([0.13, 0.02, 0.45], yaw=0.05), goal, [0, 0, 0.6], 0.0)
+    status = r.GetOutputPort("task_status").Eval(at_goal)
+    assert status[0] == 1.0 and status[1] == 0.0
+    assert status[2] == pytest.approx(np.hypot(0.03, 0.02))
+    assert status[3] == pytest.approx(0.05)
+    # z does not count for position (planar), rotation does.
+    off_z = _context(r, _state([0.1, 0.0, 0.6]), goal, [0, 0, 0.6], 0.0)
+    assert r.GetOutputPort("task_status").Eval(off_z)[0] == 1.0
+    rotated = _context(r, _state([0.1, 0.0, 0.45], yaw=0.2), goal, [0, 0, 0.6], 0.0)
+    assert r.GetOutputPort("task_status").Eval(rotated)[0] == 0.0
+    out = _context(r, _state([0.6, 0.0, 0.45]), goal, [0, 0, 0.6], 0.0)
+    assert r.GetOutputPort("task_status").Eval(out)[1] == 1.0
+
+
+def test_reward_is_potential_difference_plus_success_bonus_minus_energy():
+    cfg = TaskConfig()
+    r = TaskReward(cfg, 0.1)
+    goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
+    tool = np.array([0.0, 0.0, 0.5])
+    ctx = _context(r, _state([-0.05, 0.0, 0.45]), goal, tool, energy=10.0)
+    r.reset(ctx)  # latch potentials and energy at the start state
+    prev_obj = keypoint_potential(CORNERS, np.array([-0.05, 0, 0.45]), np.eye(3),
+                                  goal[:3], np.eye(3), cfg.keypoint_k1, cfg.keypoint_k2)
+    # Move the object halfway to the goal and spend 50 J.
+    r.GetInputPort("object_state").FixValue(ctx, _state([0.02, 0.0, 0.45]))
+    r.GetInputPort("energy").FixValue(ctx, [60.0])
+    new_obj = keypoint_potential(CORNERS, np.array([0.02, 0, 0.45]), np.eye(3), goal[:3],
+                                 np.eye(3), cfg.keypoint_k1, cfg.keypoint_k2)
+    hand_prev = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [-0.05, 0, 0.45]))
+    hand_new = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [0.02, 0, 0.45]))
+    expected = (0.995 * new_obj - prev_obj) + (0.995 * hand_new - hand_prev) - 1e-4 * 50.0
+    assert new_obj > prev_obj
+    assert r.GetOutputPort("reward").Eval(ctx)[0] == pytest.approx(expected)
+    # At the goal the object term becomes the +1 success bonus.
+    r.GetInputPort("object_state").FixValue(ctx, _state([0.1, 0.0, 0.45]))
+    hand_goal = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [0.1, 0, 0.45]))
+    expected = 1.0 + (0.995 * hand_goal - hand_prev) - 1e-4 * 50.0
+    assert r.GetOutputPort("reward").Eval(ctx)[0] == pytest.approx(expected)
+
+
+def test_keypoint_potential_sees_rotation_but_not_height():
+    args = (CORNERS, np.array([0, 0, 0.5]), np.eye(3), np.array([0, 0, 0.45]))
+    same = keypoint_potential(*args, np.eye(3), 0.302, 243.12)
+    assert same == pytest.approx(0.302)
+    assert keypoint_potential(*args, yaw_matrix(0.5), 0.302, 243.12) < same
