@@ -1,0 +1,28 @@
+"""The command line: subcommand discovery and the sim benchmark's report."""
+
+import json
+
+from corn_drake.cli import build_parser, main
+
+
+def test_subcommands_are_discovered():
+    text = build_parser().format_help()
+    assert "bench" in text and "demo" in text
+
+
+def test_bench_sim_writes_report_with_baseline(tmp_path):
+    report = tmp_path / "sim.json"
+    assert main(["bench", "sim", "--report", str(report), "--steps", "30"]) == 0
+    data = json.loads(report.read_text())
+    results = data["results"]
+    for key in ("policy_steps_per_s", "bare_physics_policy_steps_per_s", "overhead_ratio"):
+        assert results[key] > 0
+    assert abs(results["overhead_ratio"] - results["bare_physics_policy_steps_per_s"]
+               / results["policy_steps_per_s"]) < 1e-9
+    assert "cpu_count" in data["machine"]
+
+
+def test_demo_runs_and_writes_its_outputs(tmp_path):
+    assert main(["demo", "--out", str(tmp_path), "--bench-steps", "20"]) == 0
+    assert (tmp_path / "scripted_push.html").stat().st_size > 10_000
+    assert json.loads((tmp_path / "bench_sim.json").read_text())["results"]["policy_steps_per_s"] > 0

@@ -1,0 +1,22 @@
+"""Executes the notebooks in notebooks/ that need no prepared data (each must run clean)."""
+
+import os
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+from corn_drake import REPO_ROOT
+
+NOTEBOOKS = ["01_scene_and_controller.ipynb"]
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_runs(name, tmp_path, monkeypatch):
+    monkeypatch.setenv("CORN_DRAKE_NOTEBOOK_OUT", str(tmp_path))
+    nb = nbformat.read(REPO_ROOT / "notebooks" / name, as_version=4)
+    NotebookClient(nb, timeout=600, kernel_name="python3",
+                   resources={"metadata": {"path": str(REPO_ROOT)}}).execute()
+    outputs = list(Path(tmp_path).glob("*.html"))
+    assert outputs and all(p.stat().st_size > 10_000 for p in outputs)
