@@ -73,6 +73,9 @@ class ControllerConfig:
     object_margin: float = 0.2  # target within object position +- (radius + margin)
     effort_limits: list[float] = dc.field(
         default_factory=lambda: [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
+    # "symbolic": the torque law compiled into a C++ SymbolicVectorSystem (fast);
+    # "python": the same law in a Python LeafSystem (see systems/impedance_controller.py).
+    torque_backend: str = "symbolic"
 
 
 @dc.dataclass

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, RandomSource
+from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
@@ -25,9 +25,9 @@ from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
 from corn_drake.systems.energy_meter import add_energy_meter
 from corn_drake.systems.ik import ActionToJointTargets
-from corn_drake.systems.impedance_controller import VariableImpedanceController
+from corn_drake.systems.impedance_controller import make_impedance_controller
 from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
-from corn_drake.systems.reward import TaskReward
+from corn_drake.systems.reward import TaskReward, add_task_reward
 
 
 @dataclasses.dataclass
@@ -35,11 +35,12 @@ class TeacherDiagram:
     diagram: Diagram
     scene: Scene
     ik: ActionToJointTargets
-    controller: VariableImpedanceController
+    controller: object  # VariableImpedanceController or its symbolic twin (same ports)
     observations: TeacherObservations
     reward: TaskReward
+    reward_hold: ZeroOrderHold  # the previous policy step's [object_state, hand_state, energy]
     # Per-episode parameter sources, keyed by name (goal_pose, physics_params, object_cloud,
-    # object_keypoints, object_radius).
+    # object_keypoints, object_radius, torque_noise_std).
     sources: dict[str, ConstantVectorSource]
     config: TeacherDiagramConfig
     cloud_indices: np.ndarray  # which rows of the object's cloud the observation uses
@@ -83,6 +84,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
         "object_cloud": source("object_cloud", spec.cloud[cloud_indices, :3].reshape(-1)),
         "object_keypoints": source("object_keypoints", spec.bbox_corners.reshape(-1)),
         "object_radius": source("object_radius", [spec.radius]),
+        "torque_noise_std": source("torque_noise_std", [0.0]),
     }
     robot_state = plant.get_state_output_port(scene.panda)
     object_state = plant.get_state_output_port(scene.object_instance)
@@ -90,14 +92,15 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     ik = builder.AddNamedSystem("ik", ActionToJointTargets(
         cfg.controller, physics.policy_period, np.asarray(cfg.scene.robot_base), physics.armature))
     with_noise = cfg.randomization.torque_noise_std > 0
-    ctrl = builder.AddNamedSystem("controller", VariableImpedanceController(
-        cfg.controller.effort_limits, with_noise=with_noise))
+    ctrl = builder.AddNamedSystem("controller", make_impedance_controller(
+        cfg.controller.effort_limits, with_noise, cfg.controller.torque_backend))
     builder.Connect(robot_state, ik.GetInputPort("robot_state"))
     builder.Connect(object_state, ik.GetInputPort("object_state"))
     builder.Connect(sources["object_radius"].get_output_port(), ik.GetInputPort("object_radius"))
     builder.Connect(robot_state, ctrl.GetInputPort("robot_state"))
     builder.Connect(ik.GetOutputPort("q_target"), ctrl.GetInputPort("q_target"))
     builder.Connect(ik.GetOutputPort("gains"), ctrl.GetInputPort("gains"))
+    builder.Connect(sources["torque_noise_std"].get_output_port(), ctrl.GetInputPort("noise_std"))
     builder.Connect(ctrl.GetOutputPort("actuation"), plant.get_actuation_input_port(scene.panda))
     if with_noise:
         noise = builder.AddNamedSystem("torque_noise", RandomSource(
@@ -111,16 +114,13 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     for name in ("goal_pose", "physics_params", "object_cloud"):
         builder.Connect(sources[name].get_output_port(), obs.GetInputPort(name))
 
-    reward = builder.AddNamedSystem("task", TaskReward(cfg.task, physics.policy_period))
-    builder.Connect(object_state, reward.GetInputPort("object_state"))
-    builder.Connect(obs.GetOutputPort("hand_state"), reward.GetInputPort("hand_state"))
+    energy, _ = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
+                                 robot_state, physics.time_step)
+    reward, reward_hold = add_task_reward(builder, cfg.task, physics.policy_period, object_state,
+                                          obs.GetOutputPort("hand_state"), energy)
     builder.Connect(sources["goal_pose"].get_output_port(), reward.GetInputPort("goal_pose"))
     builder.Connect(sources["object_keypoints"].get_output_port(),
                     reward.GetInputPort("object_keypoints"))
-    energy, energy_meter = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
-                                            robot_state,
-                                            physics.time_step)
-    builder.Connect(energy, reward.GetInputPort("energy"))
 
     builder.ExportOutput(robot_state, "plant.robot_state")
     builder.ExportOutput(object_state, "plant.object_state")
@@ -129,7 +129,8 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     builder.ExportOutput(reward.GetOutputPort("reward"), "task.reward")
     builder.ExportOutput(reward.GetOutputPort("task_status"), "task.status")
     return TeacherDiagram(diagram=None, scene=scene, ik=ik, controller=ctrl, observations=obs,
-                          reward=reward, sources=sources, config=cfg, cloud_indices=cloud_indices)
+                          reward=reward, reward_hold=reward_hold, sources=sources, config=cfg,
+                          cloud_indices=cloud_indices)
 
 
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,

@@ -6,7 +6,9 @@ import pytest
 from corn_drake.config import ControllerConfig
 from corn_drake.scene.franka import EFFORT_LIMITS
 from corn_drake.systems.ik import ActionScaling, ActionToJointTargets, check_action
-from corn_drake.systems.impedance_controller import VariableImpedanceController
+from corn_drake.systems.impedance_controller import make_impedance_controller
+
+BACKENDS = ["python", "symbolic"]
 
 Q_HOME = np.array([0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.8])
 BASE = np.array([-0.5, 0.0, 0.4])
@@ -14,17 +16,18 @@ BASE = np.array([-0.5, 0.0, 0.4])
 
 def _torque(ctrl, x, q_target, gains, noise=None, std=0.0):
     ctx = ctrl.CreateDefaultContext()
-    ctrl.get_input_port(0).FixValue(ctx, x)
-    ctrl.get_input_port(1).FixValue(ctx, q_target)
-    ctrl.get_input_port(2).FixValue(ctx, gains)
+    ctrl.GetInputPort("robot_state").FixValue(ctx, x)
+    ctrl.GetInputPort("q_target").FixValue(ctx, q_target)
+    ctrl.GetInputPort("gains").FixValue(ctx, gains)
+    ctrl.GetInputPort("noise_std").FixValue(ctx, [std])
     if noise is not None:
-        ctrl.get_input_port(3).FixValue(ctx, noise)
-        ctrl.set_noise_std(ctx, std)
-    return ctrl.get_output_port(0).Eval(ctx)
+        ctrl.GetInputPort("unit_noise").FixValue(ctx, noise)
+    return ctrl.GetOutputPort("actuation").Eval(ctx)
 
 
-def test_torque_equals_formula_inside_limits():
-    ctrl = VariableImpedanceController(EFFORT_LIMITS)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_torque_equals_formula_inside_limits(backend):
+    ctrl = make_impedance_controller(EFFORT_LIMITS, backend=backend)
     rng = np.random.default_rng(1)
     q, v = rng.uniform(-1, 1, 7), rng.uniform(-1, 1, 7)
     dq = rng.uniform(-0.02, 0.02, 7)
@@ -36,8 +39,9 @@ def test_torque_equals_formula_inside_limits():
     np.testing.assert_allclose(tau, expected, rtol=1e-12)
 
 
-def test_torque_is_clamped_to_effort_limits():
-    ctrl = VariableImpedanceController(EFFORT_LIMITS)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_torque_is_clamped_to_effort_limits(backend):
+    ctrl = make_impedance_controller(EFFORT_LIMITS, backend=backend)
     x = np.zeros(14)
     tau = _torque(ctrl, x, np.full(7, 2.0), np.concatenate([np.full(7, 200.0), np.zeros(7)]))
     np.testing.assert_allclose(tau, EFFORT_LIMITS)
@@ -45,14 +49,25 @@ def test_torque_is_clamped_to_effort_limits():
     np.testing.assert_allclose(tau, -EFFORT_LIMITS)
 
 
-def test_torque_noise_scales_with_parameter_and_needs_the_port():
-    ctrl = VariableImpedanceController(EFFORT_LIMITS, with_noise=True)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_torque_noise_scales_with_its_std_input(backend):
+    ctrl = make_impedance_controller(EFFORT_LIMITS, with_noise=True, backend=backend)
     unit = np.linspace(-1, 1, 7)
     tau = _torque(ctrl, np.zeros(14), np.zeros(7), np.zeros(14), noise=unit, std=0.03)
     np.testing.assert_allclose(tau, 0.03 * unit)
-    quiet = VariableImpedanceController(EFFORT_LIMITS)
-    with pytest.raises(ValueError, match="without noise"):
-        quiet.set_noise_std(quiet.CreateDefaultContext(), 0.03)
+
+
+def test_backends_agree_on_random_inputs():
+    py, sym = (make_impedance_controller(EFFORT_LIMITS, True, b) for b in BACKENDS)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        args = (rng.uniform(-2, 2, 14), rng.uniform(-2, 2, 7),
+                np.concatenate([rng.uniform(10, 200, 7), rng.uniform(0, 30, 7)]))
+        noise, std = rng.normal(size=7), rng.uniform(0, 1)
+        np.testing.assert_allclose(_torque(py, *args, noise, std), _torque(sym, *args, noise, std),
+                                   rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="torque_backend"):
+        make_impedance_controller(EFFORT_LIMITS, backend="cuda")
 
 
 def test_action_scaling_maps_bounds_and_clips():

@@ -15,8 +15,11 @@ def _state(p, yaw=0.0):
     return np.concatenate([[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], p, np.zeros(6)])
 
 
-def _context(reward, obj, goal, tool, energy):
+def _context(reward, obj, goal, tool, energy, previous=None):
     ctx = reward.CreateDefaultContext()
+    if previous is None:
+        previous = np.concatenate([obj, tool, np.zeros(6), [energy]])
+    reward.GetInputPort("previous").FixValue(ctx, previous)
     reward.GetInputPort("object_state").FixValue(ctx, obj)
     reward.GetInputPort("hand_state").FixValue(ctx, np.concatenate([tool, np.zeros(6)]))
     reward.GetInputPort("goal_pose").FixValue(ctx, goal)
@@ -27,7 +30,7 @@ def _context(reward, obj, goal, tool, energy):
 
 def test_success_and_errors_at_and_near_the_goal():
     cfg = TaskConfig()
-    r = TaskReward(cfg, 0.1)
+    r = TaskReward(cfg)
     goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
     at_goal = _context(r, _state([0.13, 0.02, 0.45], yaw=0.05), goal, [0, 0, 0.6], 0.0)
     status = r.GetOutputPort("task_status").Eval(at_goal)
@@ -45,11 +48,11 @@ def test_success_and_errors_at_and_near_the_goal():
 
 def test_reward_is_potential_difference_plus_success_bonus_minus_energy():
     cfg = TaskConfig()
-    r = TaskReward(cfg, 0.1)
+    r = TaskReward(cfg)
     goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
     tool = np.array([0.0, 0.0, 0.5])
+    # The held previous step: object at x = -0.05, 10 J spent so far.
     ctx = _context(r, _state([-0.05, 0.0, 0.45]), goal, tool, energy=10.0)
-    r.reset(ctx)  # latch potentials and energy at the start state
     prev_obj = keypoint_potential(CORNERS, np.array([-0.05, 0, 0.45]), np.eye(3),
                                   goal[:3], np.eye(3), cfg.keypoint_k1, cfg.keypoint_k2)
     # Move the object halfway to the goal and spend 50 J.
@@ -74,3 +77,23 @@ def test_keypoint_potential_sees_rotation_but_not_height():
     same = keypoint_potential(*args, np.eye(3), 0.302, 243.12)
     assert same == pytest.approx(0.302)
     assert keypoint_potential(*args, yaw_matrix(0.5), 0.302, 243.12) < same
+
+
+def test_hold_in_the_teacher_diagram_latches_the_previous_policy_step():
+    from corn_drake.rl.env import TeacherEnv
+
+    env = TeacherEnv()
+    env.reset(seed=0)
+    hold_port = env.handles.reward.GetInputPort("previous")
+    reward_ctx = env.handles.reward.GetMyContextFromRoot(env.context)
+    object_port = env.diagram.GetOutputPort("plant.object_state")
+    before = object_port.Eval(env.context).copy()
+    np.testing.assert_allclose(hold_port.Eval(reward_ctx)[:13], before)
+    env.step(np.zeros(20))
+    # After one policy step the hold still shows the state at the start of that step...
+    np.testing.assert_allclose(hold_port.Eval(reward_ctx)[:13], before, atol=1e-12)
+    mid = object_port.Eval(env.context).copy()
+    env.step(np.zeros(20))
+    # ...and after the next, the state at the start of the next one.
+    np.testing.assert_allclose(hold_port.Eval(reward_ctx)[:13], mid, atol=1e-12)
+    assert hold_port.Eval(reward_ctx)[-1] > 0  # energy accumulates while the arm moves

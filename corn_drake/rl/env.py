@@ -21,7 +21,7 @@ from corn_drake.scene.objects import ObjectSpec
 from corn_drake.scene.randomization import apply_physics, sample_physics, scaled_stable_poses
 from corn_drake.systems.ik import ACTION_DIM, check_action
 from corn_drake.systems.observations import OBS_KEYS
-from corn_drake.systems.reward import STATUS_FIELDS
+from corn_drake.systems.reward import STATUS_FIELDS, reset_previous
 from corn_drake.transforms import quat_wxyz_to_matrix, yaw_matrix
 
 TABLE_MARGIN = 0.95  # objects start within 95 % of the table, minus their radius
@@ -105,8 +105,6 @@ class TeacherEnv(gym.Env):
         apply_physics(scene, phys, ctx, self._scale)
         self._scale = phys.scale
         s = phys.scale
-        h.controller.set_noise_std(h.controller.GetMyMutableContextFromRoot(ctx),
-                                   phys.torque_noise_std)
 
         q0 = self._sample_robot(rng)
         scene.plant.SetPositions(self._plant_context, scene.panda, q0)
@@ -126,9 +124,10 @@ class TeacherEnv(gym.Env):
         set_source("object_cloud", s * spec.cloud[h.cloud_indices, :3].reshape(-1))
         set_source("object_keypoints", s * spec.bbox_corners.reshape(-1))
         set_source("object_radius", [s * spec.radius])
+        set_source("torque_noise_std", [phys.torque_noise_std])
 
         h.ik.hold_position(h.ik.GetMyMutableContextFromRoot(ctx), q0)
-        h.reward.reset(h.reward.GetMyMutableContextFromRoot(ctx))
+        reset_previous(h.reward_hold, h.reward, ctx)
         self._action_port.FixValue(ctx, np.zeros(ACTION_DIM))
         self.simulator.Initialize()
         self._steps = 0

@@ -103,7 +103,12 @@ def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> 
     plant_config = MultibodyPlantConfig(
         time_step=cfg.physics.time_step,
         discrete_contact_approximation=cfg.physics.discrete_contact_approximation,
-        contact_model=cfg.physics.contact_model)
+        contact_model=cfg.physics.contact_model,
+        # Unsampled output ports: every system that updates at a policy boundary t_k (IK latch,
+        # reward hold) then sees the plant state at t_k. With sampled ports (Drake's default)
+        # they saw the state one physics step later, because the plant's own update at t_k had
+        # already been computed (tests/test_reward.py checks the hold).
+        use_sampled_output_ports=False)
     plant, scene_graph = AddMultibodyPlant(plant_config, builder)
     panda = add_franka(plant, RigidTransform(cfg.robot_base), cfg.physics.armature)
     if not cfg.physics.gravity_on_robot:
