@@ -122,6 +122,40 @@ class TeacherDiagramConfig:
     seed: int = 0
 
 
+@dc.dataclass
+class PPOConfig:
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip: float = 0.3
+    epochs: int = 8
+    minibatches: int = 1
+    lr: float = 3e-4
+    lr_min: float = 1e-6
+    lr_max: float = 1e-2
+    kl_target: float = 0.016
+    kl_stop_factor: float = 1.5
+    policy_coef: float = 0.5
+    value_coef: float = 1.0  # x 0.5 * (V - R)^2, i.e. the authors' k_val 2.0 with its own 0.5
+    bound_coef: float = 0.02
+    bound_limit: float = 1.1
+    max_grad_norm: float = 1.0
+
+
+@dc.dataclass
+class TrainConfig:
+    policy: str = "state"
+    total_steps: int = 20_000  # environment steps (transitions) over all envs
+    workers: int = 0  # 0: envs in this process; > 0: Ray actors
+    envs_per_worker: int = 4
+    rollout_steps: int = 32  # per env and update
+    seed: int = 0
+    checkpoint_every: int = 5  # updates
+    ray_address: str = ""
+    encoder: str = ""  # frozen encoder checkpoint for corn / pn
+    ppo: PPOConfig = dc.field(default_factory=PPOConfig)
+    env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
+
+
 def load_config(path: str | Path, schema: type[T]) -> T:
     """Loads a YAML file into `schema`; unknown keys or bad values raise naming the file."""
     from pydrake.common.yaml import yaml_load_typed

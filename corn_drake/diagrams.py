@@ -113,6 +113,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     builder.Connect(ik.GetOutputPort("previous_action"), obs.GetInputPort("previous_action"))
     for name in ("goal_pose", "physics_params", "object_cloud"):
         builder.Connect(sources[name].get_output_port(), obs.GetInputPort(name))
+    builder.Connect(sources["object_keypoints"].get_output_port(), obs.GetInputPort("object_corners"))
 
     energy, _ = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
                                  robot_state, physics.time_step)

@@ -8,7 +8,8 @@ from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.objects import ObjectSpec, box_spec
 
 EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
-                   "previous_action": (20,), "goal": (9,), "physics": (5,)}
+                   "previous_action": (20,), "goal": (9,), "physics": (5,),
+                   "object_keypoints": (24,)}
 
 
 @pytest.fixture(scope="module")
@@ -28,6 +29,8 @@ def test_observation_keys_shapes_and_contents(env):
     np.testing.assert_allclose(obs["goal"][:3], env.episode_info["goal_pose"][:3] - p0, atol=1e-5)
     np.testing.assert_allclose(obs["physics"], env.episode_info["physics"].as_observation(), rtol=1e-6)
     assert np.all(obs["previous_action"] == 0)
+    # Keypoints are the object's box corners at its pose: their centre is the object's origin.
+    np.testing.assert_allclose(obs["object_keypoints"].reshape(8, 3).mean(0), p0, atol=1e-5)
     # Hand-state rotation columns are orthonormal.
     c0, c1 = obs["hand_state"][3:6], obs["hand_state"][6:9]
     assert abs(np.linalg.norm(c0) - 1) < 1e-5 and abs(c0 @ c1) < 1e-5

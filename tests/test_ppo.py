@@ -5,7 +5,8 @@ from torch import nn
 
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RewardScaler, RunningMeanStd
-from corn_drake.rl.ppo import PPO, PPOConfig, compute_gae, sample_actions
+from corn_drake.config import PPOConfig
+from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 
 
 class _FlatPolicy(nn.Module):

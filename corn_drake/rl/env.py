@@ -56,7 +56,8 @@ class TeacherEnv(gym.Env):
         self._scale = 1.0
         n_pts = config.scene.object.cloud_points
         shapes = {"cloud": (n_pts, 3), "hand_state": (9,), "robot_state": (2 * NUM_JOINTS,),
-                  "previous_action": (ACTION_DIM,), "goal": (9,), "physics": (5,)}
+                  "previous_action": (ACTION_DIM,), "goal": (9,), "physics": (5,),
+                  "object_keypoints": (24,)}
         self.observation_space = gym.spaces.Dict(
             {k: gym.spaces.Box(-np.inf, np.inf, shapes[k], np.float32) for k in OBS_KEYS})
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)

@@ -14,32 +14,14 @@ steps), bound-loss coefficient 0.02, gradient clip 1.0, no entropy bonus.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Callable
 
 import torch
 from torch import nn
 
+from corn_drake.config import PPOConfig
+
 Obs = dict[str, torch.Tensor]
-
-
-@dataclasses.dataclass
-class PPOConfig:
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip: float = 0.3
-    epochs: int = 8
-    minibatches: int = 1
-    lr: float = 3e-4
-    lr_min: float = 1e-6
-    lr_max: float = 1e-2
-    kl_target: float = 0.016
-    kl_stop_factor: float = 1.5
-    policy_coef: float = 0.5
-    value_coef: float = 1.0  # x 0.5 * (V - R)^2, i.e. the authors' k_val 2.0 with its own 0.5
-    bound_coef: float = 0.02
-    bound_limit: float = 1.1
-    max_grad_norm: float = 1.0
 
 
 def compute_gae(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.Tensor,
@@ -132,7 +114,7 @@ class PPO:
                 stats["minibatches"] += 1
             if stats["early_stop"]:
                 break
-        stats.update({k: float(v) for k, v in last.items()})
+        stats.update({k: float(v.detach()) for k, v in last.items()})
         stats["lr"] = self.lr
         return stats
 

@@ -1,0 +1,49 @@
+"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/trainer.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+NAME = "train"
+HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
+
+
+def add_arguments(parser):
+    parser.add_argument("--policy", choices=("corn", "e2e", "state", "pn"), default="state")
+    parser.add_argument("--objects", default="", help="object library folder (default: the YAML's object)")
+    parser.add_argument("--encoder", default="", help="pretrained encoder checkpoint (corn, pn)")
+    parser.add_argument("--steps", type=int, default=20_000, help="total environment steps")
+    parser.add_argument("--workers", type=int, default=0, help="Ray rollout workers (0: in-process)")
+    parser.add_argument("--envs-per-worker", type=int, default=4)
+    parser.add_argument("--rollout-steps", type=int, default=32)
+    parser.add_argument("--episode-steps", type=int, default=None, help="override the 300-step limit")
+    parser.add_argument("--config", default=None, help="teacher diagram YAML")
+    parser.add_argument("--ray-address", default="", help="connect to a Ray cluster instead of a local one")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
+    parser.add_argument("--no-progress", action="store_true")
+
+
+def run(args) -> int:
+    from corn_drake.diagrams import load_teacher_config
+    from corn_drake.rl.encoders import load_encoder
+    from corn_drake.config import TrainConfig
+    from corn_drake.rl.trainer import Trainer, save_config
+
+    env_cfg = load_teacher_config(args.config)
+    if args.episode_steps:
+        env_cfg.task.episode_steps = args.episode_steps
+    if args.objects:
+        env_cfg.scene.object.kind = "library"
+        env_cfg.scene.object.library = args.objects
+    cfg = TrainConfig(policy=args.policy, total_steps=args.steps, workers=args.workers,
+                      envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
+                      seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,
+                      env=env_cfg)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_config(cfg, out / "config.yaml")
+    encoder = load_encoder(cfg.policy, cfg.encoder)
+    metrics = Trainer(cfg, out, encoder).train(progress=not args.no_progress)
+    print(f"trained {metrics['global_step']} steps; run folder {out}")
+    return 0

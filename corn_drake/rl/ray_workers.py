@@ -1,0 +1,94 @@
+"""Rollout workers as Ray actors: each holds an EnvBatch; the learner batches inference.
+
+RayEnvBatch looks like EnvBatch (reset / step over all envs of all workers, concatenated). A worker
+that dies (process killed, node lost) is replaced by a fresh actor with the same envs; its envs
+start new episodes, the step reports them as truncated with no bootstrap (final_obs absent), and
+`restarts` counts it — the run goes on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ray
+
+from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult
+
+
+@ray.remote(num_cpus=1)
+class RolloutWorker:
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int):
+        self.batch = EnvBatch(factory, num_envs, first_index)
+
+    def reset(self):
+        return self.batch.reset()
+
+    def step(self, actions: np.ndarray) -> StepResult:
+        return self.batch.step(actions)
+
+    def pid(self) -> int:
+        import os
+
+        return os.getpid()
+
+
+def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
+    """Local Ray by default, a cluster with `address`; no dashboard (nothing to serve here)."""
+    if ray.is_initialized():
+        return
+    if address:
+        ray.init(address=address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+
+
+class RayEnvBatch:
+    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int):
+        self.factory, self.envs_per_worker = factory, envs_per_worker
+        self.workers = [self._spawn(w) for w in range(num_workers)]
+        self.restarts = 0
+
+    def _spawn(self, w: int):
+        # num_cpus=0 on the actor handle: we may run more workers than cores (one-core machines).
+        return RolloutWorker.options(num_cpus=0).remote(self.factory, self.envs_per_worker,
+                                                        w * self.envs_per_worker)
+
+    def __len__(self) -> int:
+        return len(self.workers) * self.envs_per_worker
+
+    def reset(self) -> dict[str, np.ndarray]:
+        parts = ray.get([w.reset.remote() for w in self.workers])
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def step(self, actions: np.ndarray) -> StepResult:
+        E = self.envs_per_worker
+        futures = [w.step.remote(actions[i * E:(i + 1) * E]) for i, w in enumerate(self.workers)]
+        results = []
+        for i, future in enumerate(futures):
+            try:
+                results.append(ray.get(future))
+            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError):
+                results.append(self._replace(i))
+        return _concat(results, E)
+
+    def _replace(self, i: int) -> StepResult:
+        self.restarts += 1
+        self.workers[i] = self._spawn(i)
+        obs = ray.get(self.workers[i].reset.remote())
+        E = self.envs_per_worker
+        return StepResult(obs, np.zeros(E), np.zeros(E, bool), np.ones(E, bool), {}, [],
+                          sim_errors=0)
+
+    def worker_pids(self) -> list[int]:
+        return ray.get([w.pid.remote() for w in self.workers])
+
+
+def _concat(results: list[StepResult], per_worker: int) -> StepResult:
+    final_obs = {i * per_worker + j: o for i, r in enumerate(results) for j, o in r.final_obs.items()}
+    return StepResult(
+        obs={k: np.concatenate([r.obs[k] for r in results]) for k in results[0].obs},
+        rewards=np.concatenate([r.rewards for r in results]),
+        terminated=np.concatenate([r.terminated for r in results]),
+        truncated=np.concatenate([r.truncated for r in results]),
+        final_obs=final_obs,
+        episode_stats=[s for r in results for s in r.episode_stats],
+        sim_errors=sum(r.sim_errors for r in results))

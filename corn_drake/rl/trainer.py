@@ -1,0 +1,192 @@
+"""PPO training of the teacher: rollouts (in-process or Ray workers), updates, logs, checkpoints.
+
+Run folder layout: config.yaml, checkpoints/last.pt (atomic), tb/ (TensorBoard), metrics.json,
+plots/learning_curve.png. A killed run resumes from checkpoints/last.pt at the same update with
+the same optimizer, normalisers and RNG state (environments start fresh episodes).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from corn_drake.config import TrainConfig
+from corn_drake.io_utils import atomic_path, write_json, write_text
+from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.normalization import RewardScaler
+from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
+from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+
+
+def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """For frozen encoders, compute features once at collection time, not every PPO epoch."""
+    if agent.kind in ("corn", "pn"):
+        obs = dict(obs)
+        obs["features"] = agent.features(obs)
+    return obs
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, out: str | Path, encoder: torch.nn.Module | None = None):
+        self.cfg, self.out = cfg, Path(out)
+        torch.manual_seed(cfg.seed)
+        self.np_rng = np.random.default_rng(cfg.seed)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.agent = TeacherAgent(cfg.policy, encoder)
+        self.ppo = PPO(self.agent, cfg.ppo)
+        n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
+        self.reward_scaler = RewardScaler(n_envs, cfg.ppo.gamma)
+        factory = EnvFactory(cfg.env, cfg.seed)
+        if cfg.workers > 0:
+            from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+
+            init_ray(cfg.ray_address or None)
+            self.envs = RayEnvBatch(factory, cfg.workers, cfg.envs_per_worker)
+        else:
+            self.envs = EnvBatch(factory, cfg.envs_per_worker)
+        self.global_step, self.update_index, self.history = 0, 0, []
+        self.checkpoint_path = self.out / "checkpoints" / "last.pt"
+        if self.checkpoint_path.exists():
+            self._load()
+
+    # --- checkpoints -------------------------------------------------------------------------
+    def _save(self) -> None:
+        state = {"agent": self.agent.state_dict(), "ppo": self.ppo.state_dict(),
+                 "reward_scaler": self.reward_scaler.state_dict(),
+                 "global_step": self.global_step, "update_index": self.update_index,
+                 "history": self.history, "torch_rng": torch.get_rng_state(),
+                 "generator": self.generator.get_state(),
+                 "np_rng": self.np_rng.bit_generator.state, "policy": self.cfg.policy}
+        with atomic_path(self.checkpoint_path) as tmp:
+            torch.save(state, tmp)
+
+    def _load(self) -> None:
+        state = torch.load(self.checkpoint_path, weights_only=False)
+        if state["policy"] != self.cfg.policy:
+            raise ValueError(f"{self.checkpoint_path} holds a {state['policy']!r} policy, "
+                             f"not {self.cfg.policy!r}")
+        self.agent.load_state_dict(state["agent"])
+        self.ppo.load_state_dict(state["ppo"])
+        self.reward_scaler.load_state_dict(state["reward_scaler"])
+        self.global_step, self.update_index = state["global_step"], state["update_index"]
+        self.history = state["history"]
+        torch.set_rng_state(state["torch_rng"])
+        self.generator.set_state(state["generator"])
+        self.np_rng.bit_generator.state = state["np_rng"]
+
+    # --- one update --------------------------------------------------------------------------
+    def _collect(self, obs_np):
+        T, agent = self.cfg.rollout_steps, self.agent
+        buf = {k: [] for k in ("obs", "actions", "logp", "values", "rewards", "terminated",
+                                "truncated", "final_values")}
+        episodes, sim_errors = [], 0
+        for _ in range(T):
+            obs = _frozen_feature_cache(agent, obs_to_tensors(obs_np))
+            actions, logp, values = sample_actions(agent, obs, self.generator)
+            step = self.envs.step(actions.numpy())
+            final_values = torch.zeros(len(step.rewards))
+            if step.final_obs:
+                idx = sorted(step.final_obs)
+                final = obs_to_tensors({k: np.stack([step.final_obs[i][k] for i in idx])
+                                        for k in step.final_obs[idx[0]]})
+                with torch.no_grad():
+                    final_values[idx] = agent(_frozen_feature_cache(agent, final))[1]
+            rewards = torch.as_tensor(step.rewards, dtype=torch.float32)
+            dones = torch.as_tensor(step.terminated | step.truncated)
+            for key, value in (("obs", obs), ("actions", actions), ("logp", logp),
+                               ("values", values), ("rewards", self.reward_scaler(rewards, dones).float()),
+                               ("terminated", torch.as_tensor(step.terminated, dtype=torch.float32)),
+                               ("truncated", torch.as_tensor(step.truncated, dtype=torch.float32)),
+                               ("final_values", final_values)):
+                buf[key].append(value)
+            episodes += step.episode_stats
+            sim_errors += step.sim_errors
+            obs_np = step.obs
+        with torch.no_grad():
+            last_values = agent(_frozen_feature_cache(agent, obs_to_tensors(obs_np)))[1]
+        return buf, last_values, obs_np, episodes, sim_errors
+
+    def train(self, progress: bool = True) -> dict:
+        from torch.utils.tensorboard import SummaryWriter
+        from tqdm import tqdm
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        writer = SummaryWriter(str(self.out / "tb"))
+        cfg, n_envs = self.cfg, len(self.envs)
+        obs_np = self.envs.reset()
+        bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
+                   desc=f"train {cfg.policy}", unit="step")
+        recent: list[dict] = []
+        while self.global_step < cfg.total_steps:
+            t0 = time.perf_counter()
+            buf, last_values, obs_np, episodes, sim_errors = self._collect(obs_np)
+            stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
+            adv, ret = compute_gae(stack["rewards"], stack["values"], stack["terminated"],
+                                   stack["truncated"], stack["final_values"], last_values,
+                                   cfg.ppo.gamma, cfg.ppo.gae_lambda)
+            flat_obs = {k: torch.cat([o[k] for o in buf["obs"]]) for k in buf["obs"][0]}
+            stats = self.ppo.update(flat_obs, stack["actions"].flatten(0, 1),
+                                    stack["logp"].flatten(0, 1), adv.flatten(), ret.flatten(),
+                                    self.generator)
+            # Normalisers move after the update so collection and update saw the same inputs.
+            self.agent.update_normalizer(flat_obs["context"])
+            steps = cfg.rollout_steps * n_envs
+            self.global_step += steps
+            self.update_index += 1
+            recent = (recent + episodes)[-100:]
+            row = {"step": self.global_step, "update": self.update_index,
+                   "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],
+                   "lr": stats["lr"], "early_stop": stats["early_stop"],
+                   "episodes": len(episodes), "sim_errors": sim_errors,
+                   "success_rate": float(np.mean([e["success"] for e in recent])) if recent else 0.0,
+                   "return": float(np.mean([e["return"] for e in recent])) if recent else 0.0,
+                   "episode_length": float(np.mean([e["length"] for e in recent])) if recent else 0.0}
+            if hasattr(self.envs, "restarts"):
+                row["worker_restarts"] = self.envs.restarts
+            self.history.append(row)
+            for key, value in row.items():
+                if key not in ("step", "update"):
+                    writer.add_scalar(f"train/{key}", value, self.global_step)
+            bar.update(steps)
+            bar.set_postfix(success=f"{row['success_rate']:.2f}", ret=f"{row['return']:.2f}")
+            if self.update_index % cfg.checkpoint_every == 0:
+                self._save()
+        self._save()
+        writer.close()
+        bar.close()
+        metrics = {"policy": cfg.policy, "global_step": self.global_step,
+                   "updates": self.update_index, "final": self.history[-1] if self.history else {}}
+        write_json(self.out / "metrics.json", metrics)
+        plot_learning_curve(self.history, self.out / "plots" / "learning_curve.png", cfg.policy)
+        return metrics
+
+
+def plot_learning_curve(history: list[dict], path: Path, label: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not history:
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+    steps = [h["step"] for h in history]
+    axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
+    axes[0].set(xlabel="env steps", ylabel="success rate (last 100 episodes)", ylim=(0, 1))
+    axes[1].plot(steps, [h["return"] for h in history], label=label)
+    axes[1].set(xlabel="env steps", ylabel="episode return")
+    axes[0].legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)
+
+
+def save_config(cfg: TrainConfig, path: Path) -> None:
+    from pydrake.common.yaml import yaml_dump_typed
+
+    write_text(path, yaml_dump_typed(cfg))
