@@ -44,6 +44,7 @@ class TeacherDiagram:
     sources: dict[str, ConstantVectorSource]
     config: TeacherDiagramConfig
     cloud_indices: np.ndarray  # which rows of the object's cloud the observation uses
+    policy: object = None  # the PolicySystem of an evaluation diagram
 
 
 def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
@@ -135,12 +136,25 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
 
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
-                          meshcat=None) -> TeacherDiagram:
-    """The teacher rollout diagram; the action is the exported input `controller.action`."""
+                          meshcat=None, agent=None) -> TeacherDiagram:
+    """The teacher rollout diagram; the action is the exported input `controller.action`.
+
+    With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
+    (the evaluation diagram, diagrams/evaluation.yaml) and there is no action input.
+    """
     cfg = cfg or load_teacher_config()
     builder = DiagramBuilder()
     handles = add_teacher_systems(builder, cfg, spec)
-    builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
+    if agent is None:
+        builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
+    else:
+        from corn_drake.systems.policy import OBS_SIZES, PolicySystem
+
+        policy = builder.AddNamedSystem("policy", PolicySystem(agent, cfg.scene.object.cloud_points))
+        for key in OBS_SIZES:
+            builder.Connect(handles.observations.GetOutputPort(key), policy.GetInputPort(key))
+        builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
+        handles.policy = policy
     if meshcat is not None:
         from corn_drake.viz.meshcat import add_meshcat_visualizer
 

@@ -1,6 +1,7 @@
 """The command line: subcommand discovery and the sim benchmark's report."""
 
 import json
+from pathlib import Path
 
 from corn_drake.cli import build_parser, main
 
@@ -26,3 +27,19 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     assert main(["demo", "--out", str(tmp_path), "--bench-steps", "20"]) == 0
     assert (tmp_path / "scripted_push.html").stat().st_size > 10_000
     assert json.loads((tmp_path / "bench_sim.json").read_text())["results"]["policy_steps_per_s"] > 0
+
+
+def test_train_then_evaluate_writes_the_report_keys(tmp_path):
+    run = tmp_path / "run"
+    assert main(["train", "--policy", "state", "--steps", "64", "--envs-per-worker", "2",
+                 "--rollout-steps", "16", "--episode-steps", "10", "--out", str(run),
+                 "--no-progress"]) == 0
+    report = tmp_path / "eval_state.json"
+    assert main(["evaluate", "--run", str(run), "--episodes", "2", "--record", "1",
+                 "--report", str(report)]) == 0
+    data = json.loads(report.read_text())
+    for key in ("success_rate", "balanced_success_rate", "per_object", "episodes"):
+        assert key in data
+    assert len(data["episodes"]) == 2 and 0.0 <= data["success_rate"] <= 1.0
+    html = data["episodes"][0]["recording"]
+    assert html and Path(html).stat().st_size > 10_000

@@ -36,11 +36,12 @@ class TeacherEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, config: TeacherDiagramConfig | str | Path | None = None,
-                 spec: ObjectSpec | None = None, meshcat=None):
+                 spec: ObjectSpec | None = None, meshcat=None, agent=None):
+        """With `agent`, the policy runs inside the diagram: use run_closed_loop(), not step()."""
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
         self.cfg = config
-        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat)
+        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent)
         self.meshcat = meshcat
         self.diagram = self.handles.diagram
         self.scene = self.handles.scene
@@ -48,7 +49,8 @@ class TeacherEnv(gym.Env):
         self.context = self.simulator.get_mutable_context()
         self._default_context = self.diagram.CreateDefaultContext()
         self._plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
-        self._action_port = self.diagram.GetInputPort("controller.action")
+        self._action_port = (self.diagram.GetInputPort("controller.action")
+                             if agent is None else None)
         self._obs_ports = {k: self.diagram.GetOutputPort(f"obs.{k}") for k in OBS_KEYS}
         self._reward_port = self.diagram.GetOutputPort("task.reward")
         self._status_port = self.diagram.GetOutputPort("task.status")
@@ -129,7 +131,8 @@ class TeacherEnv(gym.Env):
 
         h.ik.hold_position(h.ik.GetMyMutableContextFromRoot(ctx), q0)
         reset_previous(h.reward_hold, h.reward, ctx)
-        self._action_port.FixValue(ctx, np.zeros(ACTION_DIM))
+        if self._action_port is not None:
+            self._action_port.FixValue(ctx, np.zeros(ACTION_DIM))
         self.simulator.Initialize()
         self._steps = 0
         self.episode_info = {"physics": phys, "goal_pose": _pose7(pg, Rg),
@@ -146,8 +149,23 @@ class TeacherEnv(gym.Env):
         return dict(zip(STATUS_FIELDS, self._status_port.Eval(self.context).tolist()))
 
     def step(self, action):
+        if self._action_port is None:
+            raise RuntimeError("this env's policy runs inside the diagram; use run_closed_loop()")
         action = check_action(action)  # raises before touching the simulator
         self._action_port.FixValue(self.context, action)
+        return self._advance()
+
+    def run_closed_loop(self) -> tuple[int, float, dict, dict]:
+        """Runs the in-diagram policy until the episode ends: (steps, return, status, info)."""
+        total, steps = 0.0, 0
+        while True:
+            _, reward, terminated, truncated, info = self._advance()
+            total += reward
+            steps += 1
+            if terminated or truncated:
+                return steps, total, info.get("status", {}), info
+
+    def _advance(self):
         info: dict = {}
         try:
             self.simulator.AdvanceTo(self.context.get_time() + self._period)

@@ -1,0 +1,32 @@
+"""The PolicySystem closing the loop in the evaluation diagram acts as the training path does."""
+
+import numpy as np
+import torch
+
+from corn_drake.rl.agent import TeacherAgent
+from corn_drake.rl.env import TeacherEnv
+
+
+def test_policy_system_matches_training_path_and_runs_closed_loop():
+    torch.manual_seed(0)
+    agent = TeacherAgent("state")
+    agent.eval()
+    train_env = TeacherEnv()
+    eval_env = TeacherEnv(agent=agent)
+    obs, _ = train_env.reset(seed=7)
+    eval_env.reset(seed=7)
+    policy = eval_env.handles.policy
+    ctx = policy.GetMyContextFromRoot(eval_env.context)
+    in_diagram = policy.GetOutputPort("action").Eval(ctx)
+    np.testing.assert_allclose(in_diagram, agent.act(obs), rtol=1e-6, atol=1e-6)
+    for key, value in policy.observation(ctx).items():
+        np.testing.assert_allclose(value, obs[key], rtol=1e-6, atol=1e-6, err_msg=key)
+    # One policy step of each path lands in the same state.
+    train_env.step(agent.act(obs))
+    eval_env._advance()
+    np.testing.assert_allclose(
+        eval_env.scene.plant.GetPositionsAndVelocities(eval_env._plant_context),
+        train_env.scene.plant.GetPositionsAndVelocities(train_env._plant_context), atol=1e-9)
+    eval_env.cfg.task.episode_steps = 5
+    steps, ret, status, info = eval_env.run_closed_loop()
+    assert 1 <= steps <= 5 and np.isfinite(ret) and "success" in status
