@@ -84,6 +84,12 @@ class TaskConfig:
     success_position: float = 0.05  # planar xy error, m
     success_orientation: float = 0.1  # rad
     min_goal_distance: float = 0.055
+    # "full": the paper's 6D task (goal in any stable pose, any yaw, anywhere in the goal region);
+    # "planar": the reduced benchmark (same stable pose as the start, a yaw change up to
+    # planar_max_yaw and a translation of planar_distance, still inside the goal region).
+    goal_mode: str = "full"
+    planar_distance: list[float] = dc.field(default_factory=lambda: [0.1, 0.2])
+    planar_max_yaw: float = 3.141592653589793
     goal_x: list[float] = dc.field(default_factory=lambda: [-0.16, 0.16])
     goal_y: list[float] = dc.field(default_factory=lambda: [-0.2, 0.2])
     object_min_distance_to_hand: float = 0.12

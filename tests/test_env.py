@@ -110,3 +110,23 @@ def test_missing_mesh_path_is_named(tmp_path):
         ObjectSpec(name="x", mass=0.2, unit_inertia=base.unit_inertia, com=base.com,
                    cloud=base.cloud, stable_poses=base.stable_poses, radius=base.radius,
                    bbox_corners=base.bbox_corners, hull_paths=[tmp_path / "hull7.obj"])
+
+
+def test_planar_goals_keep_the_resting_face_and_distance():
+    from corn_drake.diagrams import load_teacher_config
+    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.transforms import quat_wxyz_to_matrix
+
+    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark.yaml")
+    env = TeacherEnv(cfg)
+    for seed in range(5):
+        env.reset(seed=seed)
+        start, goal = env.episode_info["initial_object_pose"], env.episode_info["goal_pose"]
+        distance = np.linalg.norm(goal[:2] - start[:2])
+        assert 0.1 - 1e-9 <= distance <= 0.2 + 1e-9
+        assert goal[2] == pytest.approx(start[2])
+        R0, Rg = quat_wxyz_to_matrix(start[3:]), quat_wxyz_to_matrix(goal[3:])
+        # Same face down: the world z axis maps to the same object-frame direction.
+        np.testing.assert_allclose(R0.T @ [0, 0, 1], Rg.T @ [0, 0, 1], atol=1e-9)
+        yaw = np.arccos(np.clip((np.trace(Rg @ R0.T) - 1) / 2, -1, 1))
+        assert yaw <= np.pi / 2 + 1e-9

@@ -16,7 +16,8 @@ def add_arguments(parser):
     parser.add_argument("--workers", type=int, default=0, help="Ray rollout workers (0: in-process)")
     parser.add_argument("--envs-per-worker", type=int, default=4)
     parser.add_argument("--rollout-steps", type=int, default=32)
-    parser.add_argument("--episode-steps", type=int, default=None, help="override the 300-step limit")
+    parser.add_argument("--minibatches", type=int, default=4, help="PPO minibatches per epoch")
+    parser.add_argument("--episode-steps", type=int, default=None, help="override the YAML's step limit")
     parser.add_argument("--config", default=None, help="teacher diagram YAML")
     parser.add_argument("--ray-address", default="", help="connect to a Ray cluster instead of a local one")
     parser.add_argument("--seed", type=int, default=0)
@@ -40,6 +41,7 @@ def run(args) -> int:
                       envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
                       seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,
                       env=env_cfg)
+    cfg.ppo.minibatches = args.minibatches
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save_config(cfg, out / "config.yaml")

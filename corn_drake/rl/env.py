@@ -85,6 +85,10 @@ class TeacherEnv(gym.Env):
         init = poses[rng.integers(len(poses))]
         R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
         p0 = np.array([xy[0] + init[0], xy[1] + init[1], init[2]])
+        if t.goal_mode == "planar":
+            return p0, R0, *self._planar_goal(rng, p0, R0)
+        if t.goal_mode != "full":
+            raise ValueError(f"task.goal_mode must be 'full' or 'planar', got {t.goal_mode!r}")
         # Thin objects (cards, plates) only get yaw goals: they cannot be stood up by pushing.
         goal = init if spec.thin else poses[rng.integers(len(poses))]
         for _ in range(1000):
@@ -94,6 +98,19 @@ class TeacherEnv(gym.Env):
         Rg = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(goal[3:])
         pg = np.array([gxy[0] + goal[0], gxy[1] + goal[1], goal[2]])
         return p0, R0, pg, Rg
+
+    def _planar_goal(self, rng, p0: np.ndarray, R0: np.ndarray):
+        """Same resting face, moved planar_distance and turned up to planar_max_yaw."""
+        t = self.cfg.task
+        lo = np.array([t.goal_x[0], t.goal_y[0]])
+        hi = np.array([t.goal_x[1], t.goal_y[1]])
+        for _ in range(1000):
+            heading = rng.uniform(-np.pi, np.pi)
+            gxy = p0[:2] + rng.uniform(*t.planar_distance) * np.array([np.cos(heading), np.sin(heading)])
+            if np.all(gxy >= lo) and np.all(gxy <= hi):
+                break
+        Rg = yaw_matrix(rng.uniform(-t.planar_max_yaw, t.planar_max_yaw)) @ R0
+        return np.array([gxy[0], gxy[1], p0[2]]), Rg
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
