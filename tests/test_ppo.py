@@ -112,3 +112,12 @@ def test_running_stats_and_reward_scaler():
     out = scaler(torch.tensor([2.0, 4.0]), torch.tensor([False, True]))
     assert out.shape == (2,) and torch.isfinite(out).all()
     assert scaler.returns[1] == 0  # reset where the episode ended
+
+
+def test_lr_goes_down_when_updates_overshoot_the_kl_target():
+    torch.manual_seed(0)
+    policy = _FlatPolicy()
+    ppo = PPO(policy, PPOConfig(epochs=8, minibatches=4, lr=5e-3, kl_target=1e-4))
+    obs, actions, logp, adv, ret = _batch(policy)
+    ppo.update(obs, actions, logp, adv, ret, torch.Generator().manual_seed(1))
+    assert ppo.lr < 5e-3  # overshooting KL lowers the lr instead of pinning it at the maximum

@@ -103,10 +103,14 @@ class PPO:
                 last = self.losses(mb_obs, actions[idx], old_log_prob[idx], advantages[idx],
                                    returns[idx])
                 kl = float(last["kl"])
-                if stats["minibatches"] > 0 and kl > c.kl_stop_factor * c.kl_target:
-                    stats["early_stop"] = 1.0
-                    break
-                self._set_lr(kl)
+                # The first minibatch of an update sees the unchanged policy (KL = 0): it always
+                # steps and leaves the lr alone. Later ones adapt the lr, and stop the update
+                # when the policy has already moved too far.
+                if stats["minibatches"] > 0:
+                    self._set_lr(kl)
+                    if kl > c.kl_stop_factor * c.kl_target:
+                        stats["early_stop"] = 1.0
+                        break
                 self.optimizer.zero_grad()
                 last["total"].backward()
                 nn.utils.clip_grad_norm_(self.policy.parameters(), c.max_grad_norm)
