@@ -9,7 +9,7 @@ from nbclient import NotebookClient
 
 from corn_drake import REPO_ROOT
 
-NOTEBOOKS = ["01_scene_and_controller.ipynb"]
+NOTEBOOKS = ["01_scene_and_controller.ipynb", "04_teacher_rollout.ipynb"]
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
