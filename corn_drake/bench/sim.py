@@ -5,6 +5,10 @@ no Python systems; its actuation input is fixed once per policy step to the torq
 controller produced at that step, so the arm moves and touches things as in the env run.
 The overhead ratio is bare steps/s over env steps/s. A cProfile of the env run says where the
 time goes.
+
+With --policy KIND, the policy network (and its encoder) is in the loop: a batch of envs in this
+process with batched inference, against the same number of envs on Ray rollout workers
+(`ray_policy_steps_per_s`, `ray_ratio` = Ray / in-process).
 """
 
 from __future__ import annotations
@@ -24,8 +28,10 @@ def add_arguments(parser):
     parser.add_argument("--steps", type=int, default=600, help="policy steps per measurement")
     parser.add_argument("--config", default=None, help="teacher diagram YAML (default: diagrams/teacher_rollout.yaml)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--policy", default=None,
-                        help="also run a policy in the loop (added by the teacher-policy work)")
+    parser.add_argument("--policy", default=None, choices=("corn", "e2e", "state", "pn"),
+                        help="also measure with this policy (randomly initialised) in the loop")
+    parser.add_argument("--envs", type=int, default=8, help="envs in the policy-in-the-loop runs")
+    parser.add_argument("--workers", type=int, default=2, help="Ray workers in the Ray run")
 
 
 def _run_env(env, steps, rng):
@@ -68,6 +74,42 @@ def _run_bare(env, torques):
     return time.perf_counter() - t0
 
 
+def _policy_loop(batch, agent, steps: int) -> float:
+    from corn_drake.rl.agent import obs_to_tensors
+    from corn_drake.rl.ppo import sample_actions
+
+    obs = batch.reset()
+    for _ in range(3):  # warm-up (Ray actors, first inference)
+        obs = batch.step(sample_actions(agent, obs_to_tensors(obs))[0].numpy()).obs
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        obs = batch.step(sample_actions(agent, obs_to_tensors(obs))[0].numpy()).obs
+    return steps * len(batch) / (time.perf_counter() - t0)
+
+
+def _policy_results(args, cfg) -> dict:
+    import ray
+
+    from corn_drake.rl.agent import TeacherAgent
+    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+
+    agent = TeacherAgent(args.policy, make_encoder(args.policy))
+    factory = EnvFactory(cfg, args.seed)
+    rounds = max(args.steps // args.envs, 10)
+    local = _policy_loop(EnvBatch(factory, args.envs), agent, rounds)
+    init_ray(num_cpus=args.workers)
+    try:
+        remote = _policy_loop(RayEnvBatch(factory, args.workers, args.envs // args.workers), agent,
+                              rounds)
+    finally:
+        ray.shutdown()
+    return {"policy": args.policy, "envs": args.envs, "ray_workers": args.workers,
+            "in_process_policy_steps_per_s": local, "ray_policy_steps_per_s": remote,
+            "ray_ratio": remote / local}
+
+
 def run(args) -> dict:
     from corn_drake.rl.env import TeacherEnv
 
@@ -85,7 +127,10 @@ def run(args) -> dict:
     env_rate = args.steps / env_time
     bare_rate = args.steps / bare_time
     physics = env.cfg.scene.physics
-    return {
+    extra = {}
+    if args.policy:
+        extra = _policy_results(args, env.cfg)
+    result = {
         "policy_steps_per_s": env_rate,
         "bare_physics_policy_steps_per_s": bare_rate,
         "overhead_ratio": bare_rate / env_rate,
@@ -93,4 +138,10 @@ def run(args) -> dict:
         "steps": args.steps,
         "object": env.scene.object_spec.name,
         "profile_top_tottime": stream.getvalue().splitlines()[:40],
+        **extra,
     }
+    if args.policy:
+        # With a policy the headline figure is the policy-in-the-loop rate.
+        result["env_only_policy_steps_per_s"] = result["policy_steps_per_s"]
+        result["policy_steps_per_s"] = extra["in_process_policy_steps_per_s"]
+    return result

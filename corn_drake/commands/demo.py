@@ -52,7 +52,8 @@ def run(args) -> int:
     print(f"[demo] scripted push: {result.steps} steps, return {result.total_reward:.3f}, "
           f"final xy error {result.final_status['position_error']:.3f} m")
 
-    bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0})()
+    bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0,
+                                       "policy": None})()
     report_path = out / "bench_sim.json"
     report = write_report(str(report_path), "sim", bench_sim(bench_args))["results"]
     outputs["simulation speed report"] = report_path

@@ -15,3 +15,11 @@ def load_encoder(policy: str, checkpoint: str | Path | None):
             raise FileNotFoundError(f"encoder checkpoint not found: {checkpoint}")
     raise NotImplementedError(
         f"policy {policy!r}: the patch-transformer / PointNet encoders are not in this build yet")
+
+
+def make_encoder(policy: str):
+    """A randomly initialised encoder of the kind `policy` uses (for e2e and for benchmarks)."""
+    if policy == "state":
+        return None
+    raise NotImplementedError(
+        f"policy {policy!r}: the patch-transformer / PointNet encoders are not in this build yet")
