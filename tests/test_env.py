@@ -66,11 +66,11 @@ def test_reset_rerandomizes_without_rebuilding(env):
 def test_nan_action_raises_and_does_not_poison_the_state(env):
     env.reset(seed=4)
     env.step(np.zeros(20))
-    t, x = env.context.get_time(), env.scene.plant.GetPositionsAndVelocities(env._plant_context).copy()
+    t, x = env.context.get_time(), env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()
     with pytest.raises(ValueError, match="non-finite"):
         env.step(np.full(20, np.nan))
     assert env.context.get_time() == t
-    np.testing.assert_array_equal(env.scene.plant.GetPositionsAndVelocities(env._plant_context), x)
+    np.testing.assert_array_equal(env.scene.plant.GetPositionsAndVelocities(env.plant_context), x)
     obs, *_ = env.step(np.zeros(20))
     assert all(np.isfinite(v).all() for v in obs.values())
 
@@ -88,7 +88,7 @@ def test_object_leaving_the_workspace_terminates(env):
     env.reset(seed=0)
     plant = env.scene.plant
     from pydrake.math import RigidTransform
-    plant.SetFreeBodyPose(env._plant_context, env.scene.object_body, RigidTransform([0.0, 0.0, 0.1]))
+    plant.SetFreeBodyPose(env.plant_context, env.scene.object_body, RigidTransform([0.0, 0.0, 0.1]))
     _, _, terminated, _, info = env.step(np.zeros(20))
     assert terminated and info["status"]["out_of_workspace"] == 1.0
 

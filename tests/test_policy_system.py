@@ -25,8 +25,8 @@ def test_policy_system_matches_training_path_and_runs_closed_loop():
     train_env.step(agent.act(obs))
     eval_env._advance()
     np.testing.assert_allclose(
-        eval_env.scene.plant.GetPositionsAndVelocities(eval_env._plant_context),
-        train_env.scene.plant.GetPositionsAndVelocities(train_env._plant_context), atol=1e-9)
+        eval_env.scene.plant.GetPositionsAndVelocities(eval_env.plant_context),
+        train_env.scene.plant.GetPositionsAndVelocities(train_env.plant_context), atol=1e-9)
     eval_env.cfg.task.episode_steps = 5
     steps, ret, status, info = eval_env.run_closed_loop()
     assert 1 <= steps <= 5 and np.isfinite(ret) and "success" in status

@@ -79,7 +79,7 @@ def test_scripted_push_moves_the_box():
         assert "sim_error" not in info
         if terminated or truncated:
             break
-    p1 = env.scene.plant.EvalBodyPoseInWorld(env._plant_context, env.scene.object_body).translation()
+    p1 = env.scene.plant.EvalBodyPoseInWorld(env.plant_context, env.scene.object_body).translation()
     moved = p1[:2] - p0[:2]
     assert np.linalg.norm(moved) > 0.05
     assert moved @ np.array([1.0, 0.3]) > 0  # along the push direction

@@ -63,7 +63,7 @@ def _run_bare(env, torques):
     # Start from the env's initial state so contacts are comparable.
     scene.plant.SetPositionsAndVelocities(
         scene.plant.GetMyMutableContextFromRoot(ctx),
-        env.scene.plant.GetPositionsAndVelocities(env._plant_context))
+        env.scene.plant.GetPositionsAndVelocities(env.plant_context))
     port = diagram.GetInputPort("tau")
     period = env.cfg.scene.physics.policy_period
     sim.Initialize()

@@ -67,6 +67,11 @@ class TeacherEnv(gym.Env):
         self._np_random = np.random.default_rng(config.seed)
         self.episode_info: dict = {}
 
+    @property
+    def plant_context(self):
+        """The plant's context inside the simulator's root context."""
+        return self._plant_context
+
     # --- episode sampling --------------------------------------------------------------------
     def _sample_robot(self, rng) -> np.ndarray:
         t = self.cfg.task

@@ -10,7 +10,6 @@ from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMate
                               Convex, Cylinder, GeometryId, GeometrySet, ProximityProperties,
                               SceneGraph)
 from pydrake.math import RigidTransform
-from pydrake.multibody.math import SpatialVelocity  # noqa: F401  (re-exported for users)
 from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction, MultibodyPlant,
                                      MultibodyPlantConfig)
 from pydrake.multibody.tree import ModelInstanceIndex, RigidBody, SpatialInertia, UnitInertia
@@ -118,7 +117,6 @@ def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> 
     instance, body, object_gids = _add_object(plant, cfg, spec)
     plant.Finalize()
 
-    inspector = scene_graph.model_inspector()
     robot_gids = [g for b in plant.GetBodyIndices(panda)
                   for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))]
     finger_gids = [g for name in FINGER_BODIES
@@ -126,7 +124,6 @@ def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> 
     # The arm never needs to collide with itself; skipping those pairs saves contact queries.
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_gids)))
-    del inspector
     return Scene(plant=plant, scene_graph=scene_graph, panda=panda, object_instance=instance,
                  object_body=body, object_spec=spec, object_geometries=object_gids,
                  table_geometries=table_gids, finger_geometries=finger_gids,
