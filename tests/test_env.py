@@ -130,3 +130,29 @@ def test_planar_goals_keep_the_resting_face_and_distance():
         np.testing.assert_allclose(R0.T @ [0, 0, 1], Rg.T @ [0, 0, 1], atol=1e-9)
         yaw = np.arccos(np.clip((np.trace(Rg @ R0.T) - 1) / 2, -1, 1))
         assert yaw <= np.pi / 2 + 1e-9
+
+
+def test_object_scale_is_randomized_through_the_context():
+    cfg = TeacherDiagramConfig()
+    cfg.randomization.object_radius = [0.05, 0.10]
+    env = TeacherEnv(cfg)
+    base = np.array(cfg.scene.object.size)
+    sizes = []
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        scale = env.episode_info["physics"].scale
+        assert 0.05 <= scale * env.scene.object_spec.radius <= 0.10
+        sg = env.scene.scene_graph
+        inspector = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(env.context)).inspector()
+        size = inspector.GetShape(env.scene.object_geometries[0]).size()
+        np.testing.assert_allclose(size, scale * base, rtol=1e-9)
+        sizes.append(size[0])
+        # The scaled object rests where its scaled stable pose puts it, and the cloud matches.
+        z0 = env.episode_info["initial_object_pose"][2]
+        for _ in range(5):
+            obs, *_ = env.step(np.zeros(20))
+        z1 = env.scene.plant.EvalBodyPoseInWorld(env.plant_context, env.scene.object_body).translation()[2]
+        assert abs(z1 - z0) < 0.002
+        extent = np.ptp(obs["cloud"], axis=0)
+        assert extent.max() <= scale * np.linalg.norm(base) + 1e-6
+    assert len(set(np.round(sizes, 6))) == 3
