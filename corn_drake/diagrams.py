@@ -118,7 +118,8 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
     energy, _ = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
                                  robot_state, physics.time_step)
-    reward, reward_hold = add_task_reward(builder, cfg.task, physics.policy_period, object_state,
+    reward, reward_hold = add_task_reward(builder, cfg.task, physics.policy_period,
+                                          physics.time_step, object_state,
                                           obs.GetOutputPort("hand_state"), energy)
     builder.Connect(sources["goal_pose"].get_output_port(), reward.GetInputPort("goal_pose"))
     builder.Connect(sources["object_keypoints"].get_output_port(),

@@ -30,7 +30,7 @@ def _context(reward, obj, goal, tool, energy, previous=None):
 
 def test_success_and_errors_at_and_near_the_goal():
     cfg = TaskConfig()
-    r = TaskReward(cfg)
+    r = TaskReward(cfg, 8)
     goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
     at_goal = _context(r, _state([0.13, 0.02, 0.45], yaw=0.05), goal, [0, 0, 0.6], 0.0)
     status = r.GetOutputPort("task_status").Eval(at_goal)
@@ -48,7 +48,7 @@ def test_success_and_errors_at_and_near_the_goal():
 
 def test_reward_is_potential_difference_plus_success_bonus_minus_energy():
     cfg = TaskConfig()
-    r = TaskReward(cfg)
+    r = TaskReward(cfg, 8)
     goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
     tool = np.array([0.0, 0.0, 0.5])
     # The held previous step: object at x = -0.05, 10 J spent so far.
@@ -62,13 +62,14 @@ def test_reward_is_potential_difference_plus_success_bonus_minus_energy():
                                  np.eye(3), cfg.keypoint_k1, cfg.keypoint_k2)
     hand_prev = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [-0.05, 0, 0.45]))
     hand_new = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [0.02, 0, 0.45]))
-    expected = (0.995 * new_obj - prev_obj) + (0.995 * hand_new - hand_prev) - 1e-4 * 50.0
+    # Energy: 50 over the step's 8 physics steps -> a mean of 6.25 per physics step.
+    expected = (0.995 * new_obj - prev_obj) + (0.995 * hand_new - hand_prev) - 1e-4 * 50.0 / 8
     assert new_obj > prev_obj
     assert r.GetOutputPort("reward").Eval(ctx)[0] == pytest.approx(expected)
     # At the goal the object term becomes the +1 success bonus.
     r.GetInputPort("object_state").FixValue(ctx, _state([0.1, 0.0, 0.45]))
     hand_goal = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * np.linalg.norm(tool - [0.1, 0, 0.45]))
-    expected = 1.0 + (0.995 * hand_goal - hand_prev) - 1e-4 * 50.0
+    expected = 1.0 + (0.995 * hand_goal - hand_prev) - 1e-4 * 50.0 / 8
     assert r.GetOutputPort("reward").Eval(ctx)[0] == pytest.approx(expected)
 
 

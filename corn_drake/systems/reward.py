@@ -3,7 +3,8 @@
 r = [g*Phi_obj(s') - Phi_obj(s)] + clip(g*Phi_hand(s') - Phi_hand(s), +-clip) - c_E * E
 with Phi_obj the mean over the 8 bounding-box keypoints of k1 * 0.995^(k2 * |k_i - k_i_goal|)
 (z translation ignored, full rotation kept), Phi_hand = k1_hand * 0.995^(k2 * |p_tool - p_obj|),
-E the actuation energy of the policy step. On a success step the object term is replaced by +1.
+E the actuation "energy" of the policy step: sum_j |tau_j qdot_j| averaged over its physics steps
+(the authors' E / 8 at 8 substeps). On a success step the object term is replaced by +1.
 
 The previous policy step is remembered by a C++ ZeroOrderHold of [object_state, hand_state,
 energy] at the policy period (add_task_reward wires it); the reward evaluates both potentials
@@ -40,9 +41,10 @@ PREVIOUS_SIZE = 13 + 9 + 1  # held [object_state, hand_state, energy]
 
 
 class TaskReward(LeafSystem):
-    def __init__(self, cfg: TaskConfig):
+    def __init__(self, cfg: TaskConfig, physics_steps_per_policy_step: int = 8):
         super().__init__()
         self._cfg = cfg
+        self._substeps = physics_steps_per_policy_step
         self.DeclareVectorInputPort("object_state", 13)
         self.DeclareVectorInputPort("hand_state", 9)
         self.DeclareVectorInputPort("goal_pose", 7)
@@ -84,7 +86,7 @@ class TaskReward(LeafSystem):
         success = self._status_port.Eval(context)[0] > 0  # cached: computed once per state
         obj_term = cfg.success_reward if success else cfg.potential_gamma * phi_obj - prev_obj
         hand_term = np.clip(cfg.potential_gamma * phi_hand - prev_hand, -cfg.hand_clip, cfg.hand_clip)
-        energy = self.get_input_port(4).Eval(context)[0] - prev[-1]
+        energy = (self.get_input_port(4).Eval(context)[0] - prev[-1]) / self._substeps
         output.SetFromVector([obj_term + hand_term - cfg.energy_coef * energy])
 
     def _calc_status(self, context, output: BasicVector):
@@ -92,7 +94,7 @@ class TaskReward(LeafSystem):
 
 
 def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, policy_period: float,
-                    object_state: OutputPort, hand_state: OutputPort, energy: OutputPort,
+                    physics_time_step: float, object_state: OutputPort, hand_state: OutputPort, energy: OutputPort,
                     name: str = "task") -> tuple[TaskReward, ZeroOrderHold]:
     """TaskReward plus the hold of the previous policy step's state; returns (reward, hold).
 
@@ -100,7 +102,8 @@ def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, policy_period: flo
     into a context, call `reset_previous(hold, reward, context)` so the first step's reward
     starts from it.
     """
-    reward = builder.AddNamedSystem(name, TaskReward(cfg))
+    substeps = round(policy_period / physics_time_step)
+    reward = builder.AddNamedSystem(name, TaskReward(cfg, substeps))
     mux = builder.AddNamedSystem(f"{name}.previous_inputs", Multiplexer([13, 9, 1]))
     hold = builder.AddNamedSystem(f"{name}.previous", ZeroOrderHold(policy_period, PREVIOUS_SIZE))
     for i, port in enumerate((object_state, hand_state, energy)):
