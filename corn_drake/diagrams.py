@@ -127,6 +127,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
     builder.ExportOutput(robot_state, "plant.robot_state")
     builder.ExportOutput(object_state, "plant.object_state")
+    builder.ExportOutput(obs.GetOutputPort("observation"), "obs.observation")
     for key in OBS_KEYS:
         builder.ExportOutput(obs.GetOutputPort(key), f"obs.{key}")
     builder.ExportOutput(reward.GetOutputPort("reward"), "task.reward")
@@ -149,11 +150,11 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
     if agent is None:
         builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
     else:
-        from corn_drake.systems.policy import OBS_SIZES, PolicySystem
+        from corn_drake.systems.policy import PolicySystem
 
         policy = builder.AddNamedSystem("policy", PolicySystem(agent, cfg.scene.object.cloud_points))
-        for key in OBS_SIZES:
-            builder.Connect(handles.observations.GetOutputPort(key), policy.GetInputPort(key))
+        builder.Connect(handles.observations.GetOutputPort("observation"),
+                        policy.GetInputPort("observation"))
         builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
         handles.policy = policy
     if meshcat is not None:

@@ -51,17 +51,14 @@ class TeacherEnv(gym.Env):
         self._plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
         self._action_port = (self.diagram.GetInputPort("controller.action")
                              if agent is None else None)
-        self._obs_ports = {k: self.diagram.GetOutputPort(f"obs.{k}") for k in OBS_KEYS}
+        self._obs_port = self.diagram.GetOutputPort("obs.observation")
+        self._layout = self.handles.observations.layout
         self._reward_port = self.diagram.GetOutputPort("task.reward")
         self._status_port = self.diagram.GetOutputPort("task.status")
         self._period = config.scene.physics.policy_period
         self._scale = 1.0
-        n_pts = config.scene.object.cloud_points
-        shapes = {"cloud": (n_pts, 3), "hand_state": (9,), "robot_state": (2 * NUM_JOINTS,),
-                  "previous_action": (ACTION_DIM,), "goal": (9,), "physics": (5,),
-                  "object_keypoints": (24,)}
         self.observation_space = gym.spaces.Dict(
-            {k: gym.spaces.Box(-np.inf, np.inf, shapes[k], np.float32) for k in OBS_KEYS})
+            {k: gym.spaces.Box(-np.inf, np.inf, self._layout.shapes[k], np.float32) for k in OBS_KEYS})
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         self._steps = 0
         self._np_random = np.random.default_rng(config.seed)
@@ -163,9 +160,7 @@ class TeacherEnv(gym.Env):
 
     # --- stepping ----------------------------------------------------------------------------
     def _observation(self) -> dict[str, np.ndarray]:
-        obs = {k: np.asarray(p.Eval(self.context), dtype=np.float32) for k, p in self._obs_ports.items()}
-        obs["cloud"] = obs["cloud"].reshape(-1, 3)
-        return obs
+        return self._layout.unpack(self._obs_port.Eval(self.context))
 
     def _status(self) -> dict[str, float]:
         return dict(zip(STATUS_FIELDS, self._status_port.Eval(self.context).tolist()))

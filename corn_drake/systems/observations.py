@@ -1,4 +1,4 @@
-"""TeacherObservations: the privileged observation of the teacher policy, one output per key.
+"""TeacherObservations: the privileged observation of the teacher policy.
 
 cloud (N x 3, flattened): the object's fixed surface sample moved rigidly to its current pose;
 hand_state (9): tool position + 6D rotation, world frame; robot_state (14): [q, qdot];
@@ -6,6 +6,11 @@ previous_action (20, physical units); goal (9): goal position minus object posit
 R_goal R_obj^T; physics (5): mass, table / object / finger friction, restitution;
 object_keypoints (24): the 8 bounding-box corners at the current pose, world frame (the input
 of the `state` baseline, which sees no cloud).
+
+Everything is computed once per state into the cached `observation` output (ObservationLayout
+packs and unpacks it); the named per-key outputs are slices of it for readers of one signal.
+Readers of all of them (the gymnasium env, PolicySystem) take the packed port: one Python call
+per policy step instead of seven.
 """
 
 from __future__ import annotations
@@ -22,6 +27,22 @@ OBS_KEYS = ("cloud", "hand_state", "robot_state", "previous_action", "goal", "ph
             "object_keypoints")
 
 
+class ObservationLayout:
+    """Offsets of each key in the packed observation vector."""
+
+    def __init__(self, num_points: int):
+        self.shapes = {"cloud": (num_points, 3), "hand_state": (9,), "robot_state": (2 * NUM_JOINTS,),
+                       "previous_action": (ACTION_DIM,), "goal": (9,), "physics": (5,),
+                       "object_keypoints": (24,)}
+        sizes = [int(np.prod(self.shapes[k])) for k in OBS_KEYS]
+        ends = np.cumsum(sizes)
+        self.slices = {k: slice(int(e - n), int(e)) for k, n, e in zip(OBS_KEYS, sizes, ends)}
+        self.size = int(ends[-1])
+
+    def unpack(self, packed: np.ndarray, dtype=np.float32) -> dict[str, np.ndarray]:
+        return {k: np.asarray(packed[s], dtype).reshape(self.shapes[k]) for k, s in self.slices.items()}
+
+
 def object_pose_from_state(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position, rotation matrix) from a free body's 13-D state [q_wxyz, p, w, v]."""
     return x[4:7], quat_wxyz_to_matrix(x[:4])
@@ -30,56 +51,50 @@ def object_pose_from_state(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class TeacherObservations(LeafSystem):
     def __init__(self, num_points: int, robot_base: np.ndarray):
         super().__init__()
-        self._n = num_points
+        self.layout = ObservationLayout(num_points)
         self._plant = make_controller_plant()
         self._plant_context = self._plant.CreateDefaultContext()
         self._tool = tool_frame(self._plant)
         self._X_WB = RigidTransform(np.asarray(robot_base, float))
-        self.DeclareVectorInputPort("robot_state", 2 * NUM_JOINTS)
-        self.DeclareVectorInputPort("object_state", 13)
-        self.DeclareVectorInputPort("previous_action", ACTION_DIM)
-        self.DeclareVectorInputPort("goal_pose", 7)
-        self.DeclareVectorInputPort("physics_params", 5)
-        self.DeclareVectorInputPort("object_cloud", 3 * num_points)
-        self.DeclareVectorInputPort("object_corners", 24)
-        self.DeclareVectorOutputPort("cloud", 3 * num_points, self._calc_cloud)
-        self.DeclareVectorOutputPort("hand_state", 9, self._calc_hand)
-        self.DeclareVectorOutputPort("robot_state", 2 * NUM_JOINTS, self._calc_robot)
-        self.DeclareVectorOutputPort("previous_action", ACTION_DIM, self._calc_prev)
-        self.DeclareVectorOutputPort("goal", 9, self._calc_goal)
-        self.DeclareVectorOutputPort("physics", 5, self._calc_physics)
-        self.DeclareVectorOutputPort("object_keypoints", 24, self._calc_keypoints)
+        self._in = {name: self.DeclareVectorInputPort(name, size) for name, size in (
+            ("robot_state", 2 * NUM_JOINTS), ("object_state", 13), ("previous_action", ACTION_DIM),
+            ("goal_pose", 7), ("physics_params", 5), ("object_cloud", 3 * num_points),
+            ("object_corners", 24))}
+        self._packed = self.DeclareVectorOutputPort("observation", self.layout.size, self._calc_packed)
+        for key in OBS_KEYS:
+            self.DeclareVectorOutputPort(key, self.layout.slices[key].stop - self.layout.slices[key].start,
+                                         self._slice_calculator(key))
 
     def tool_pose(self, q: np.ndarray) -> RigidTransform:
         self._plant.SetPositions(self._plant_context, q)
         return self._X_WB @ self._plant.CalcRelativeTransform(
             self._plant_context, self._plant.world_frame(), self._tool)
 
-    def _posed(self, context, port_index: int) -> np.ndarray:
-        """Object-frame points from input `port_index`, moved to the object's current pose."""
-        p, R = object_pose_from_state(self.get_input_port(1).Eval(context))
-        return (self.get_input_port(port_index).Eval(context).reshape(-1, 3) @ R.T + p).reshape(-1)
+    def _calc_packed(self, context, output: BasicVector):
+        def get(name):
+            return self._in[name].Eval(context)
 
-    def _calc_cloud(self, context, output: BasicVector):
-        output.SetFromVector(self._posed(context, 5))
+        x = get("robot_state")
+        p, R = object_pose_from_state(get("object_state"))
+        X_tool = self.tool_pose(x[:NUM_JOINTS])
+        g = get("goal_pose")
+        parts = {
+            "cloud": get("object_cloud").reshape(-1, 3) @ R.T + p,
+            "hand_state": pose9(X_tool.translation(), X_tool.rotation().matrix()),
+            "robot_state": x,
+            "previous_action": get("previous_action"),
+            "goal": pose9(g[:3] - p, quat_wxyz_to_matrix(g[3:]) @ R.T),
+            "physics": get("physics_params"),
+            "object_keypoints": get("object_corners").reshape(-1, 3) @ R.T + p,
+        }
+        out = output.get_mutable_value()
+        for key, s in self.layout.slices.items():
+            out[s] = np.ravel(parts[key])
 
-    def _calc_keypoints(self, context, output: BasicVector):
-        output.SetFromVector(self._posed(context, 6))
+    def _slice_calculator(self, key: str):
+        s = self.layout.slices[key]
 
-    def _calc_hand(self, context, output: BasicVector):
-        X = self.tool_pose(self.get_input_port(0).Eval(context)[:NUM_JOINTS])
-        output.SetFromVector(pose9(X.translation(), X.rotation().matrix()))
+        def calc(context, output: BasicVector):
+            output.SetFromVector(self._packed.Eval(context)[s])
 
-    def _calc_robot(self, context, output: BasicVector):
-        output.SetFromVector(self.get_input_port(0).Eval(context))
-
-    def _calc_prev(self, context, output: BasicVector):
-        output.SetFromVector(self.get_input_port(2).Eval(context))
-
-    def _calc_goal(self, context, output: BasicVector):
-        p, R = object_pose_from_state(self.get_input_port(1).Eval(context))
-        g = self.get_input_port(3).Eval(context)
-        output.SetFromVector(pose9(g[:3] - p, quat_wxyz_to_matrix(g[3:]) @ R.T))
-
-    def _calc_physics(self, context, output: BasicVector):
-        output.SetFromVector(self.get_input_port(4).Eval(context))
+        return calc
