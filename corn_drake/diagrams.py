@@ -28,6 +28,7 @@ from corn_drake.systems.ik import ActionToJointTargets
 from corn_drake.systems.impedance_controller import make_impedance_controller
 from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
 from corn_drake.systems.reward import TaskReward, add_task_reward
+from corn_drake.timing import clock_of
 
 
 @dataclasses.dataclass
@@ -91,7 +92,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     object_state = plant.get_state_output_port(scene.object_instance)
 
     ik = builder.AddNamedSystem("ik", ActionToJointTargets(
-        cfg.controller, physics.policy_period, np.asarray(cfg.scene.robot_base), physics.armature))
+        cfg.controller, clock_of(physics), np.asarray(cfg.scene.robot_base), physics.armature))
     with_noise = cfg.randomization.torque_noise_std > 0
     ctrl = builder.AddNamedSystem("controller", make_impedance_controller(
         cfg.controller.effort_limits, with_noise, cfg.controller.torque_backend))
@@ -118,8 +119,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
     energy, _ = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
                                  robot_state, physics.time_step)
-    reward, reward_hold = add_task_reward(builder, cfg.task, physics.policy_period,
-                                          physics.time_step, object_state,
+    reward, reward_hold = add_task_reward(builder, cfg.task, clock_of(physics), object_state,
                                           obs.GetOutputPort("hand_state"), energy)
     builder.Connect(sources["goal_pose"].get_output_port(), reward.GetInputPort("goal_pose"))
     builder.Connect(sources["object_keypoints"].get_output_port(),

@@ -7,6 +7,7 @@ from corn_drake.config import ControllerConfig
 from corn_drake.scene.franka import EFFORT_LIMITS
 from corn_drake.systems.ik import ActionScaling, ActionToJointTargets, check_action
 from corn_drake.systems.impedance_controller import make_impedance_controller
+from corn_drake.timing import PolicyClock
 
 BACKENDS = ["python", "symbolic"]
 
@@ -86,7 +87,7 @@ def test_bad_actions_are_rejected_with_a_clear_error(bad):
 
 
 def test_ik_step_reduces_end_effector_error():
-    ik = ActionToJointTargets(ControllerConfig(), 0.1, BASE)
+    ik = ActionToJointTargets(ControllerConfig(), PolicyClock(0.1, 0.0125), BASE)
     X0 = ik.ee_pose(Q_HOME)
     rng = np.random.default_rng(2)
     for _ in range(10):
@@ -106,7 +107,7 @@ def test_ik_step_reduces_end_effector_error():
 
 def test_ik_target_is_clamped_to_the_object_box():
     cfg = ControllerConfig()
-    ik = ActionToJointTargets(cfg, 0.1, BASE)
+    ik = ActionToJointTargets(cfg, PolicyClock(0.1, 0.0125), BASE)
     p_ee = ik.ee_pose(Q_HOME).translation()
     radius = 0.05
     # Object far below the hand: the target may not go above object z + radius + margin.

@@ -73,7 +73,7 @@ def test_scripted_push_moves_the_box():
     env.cfg.randomization.enabled = False
     obs, _ = env.reset(seed=3)
     p0 = env.episode_info["initial_object_pose"][:3]
-    push = ScriptedPush(env.cfg.controller, p0[:2], [1.0, 0.3])
+    push = ScriptedPush.toward_table_centre(env.cfg.controller, p0[:2])
     for _ in range(60):
         obs, _, terminated, truncated, info = env.step(push(obs["hand_state"]))
         assert "sim_error" not in info
@@ -82,5 +82,5 @@ def test_scripted_push_moves_the_box():
     p1 = env.scene.plant.EvalBodyPoseInWorld(env.plant_context, env.scene.object_body).translation()
     moved = p1[:2] - p0[:2]
     assert np.linalg.norm(moved) > 0.05
-    assert moved @ np.array([1.0, 0.3]) > 0  # along the push direction
+    assert moved @ -p0[:2] > 0  # along the push direction, towards the table's centre
     assert abs(p1[2] - p0[2]) < 0.005  # slid, still resting on the table

@@ -1,10 +1,12 @@
 """`corn-drake bench sim`: policy steps/s of TeacherEnv vs bare physics of the same plant.
 
-Baseline ("bare physics"): the same scene (plant + scene graph, same object, same time step) with
-no Python systems; its actuation input is fixed once per policy step to the torques the env's
-controller produced at that step, so the arm moves and touches things as in the env run.
-The overhead ratio is bare steps/s over env steps/s. A cProfile of the env run says where the
-time goes.
+Baseline ("bare physics"): the same scene (plant + scene graph, same object, same domain
+randomization, same time step) with no Python systems, driven by the exact torques the env's
+controller applied at every physics step (recorded in an untimed pass, replayed through a C++
+TrajectorySource), from the same initial states. Both runs therefore simulate the same
+trajectories — same contacts, same solver work — and `replay_max_position_error` says how
+closely. The overhead ratio is bare steps/s over env steps/s; a cProfile of the env run says
+where the time goes.
 
 With --policy KIND, the policy network (and its encoder) is in the loop: a batch of envs in this
 process with batched inference, against the same number of envs on Ray rollout workers
@@ -34,44 +36,100 @@ def add_arguments(parser):
     parser.add_argument("--workers", type=int, default=2, help="Ray workers in the Ray run")
 
 
-def _run_env(env, steps, rng):
-    torques = []
-    env.reset(seed=int(rng.integers(1 << 31)))
-    ctrl_port = env.handles.controller.GetOutputPort("actuation")
-    ctrl_ctx = env.handles.controller.GetMyContextFromRoot(env.context)
+def _episodes(env, steps: int, seed: int):
+    """Episode plans [(seed, actions)] adding up to `steps` policy steps."""
+    rng = np.random.default_rng(seed)
+    plans, left = [], steps
+    while left > 0:
+        n = min(left, env.cfg.task.episode_steps)
+        plans.append((int(rng.integers(1 << 31)), rng.uniform(-1, 1, (n, 20))))
+        left -= n
+    return plans
+
+
+def _record(env, plans):
+    """Untimed pass: per episode the DR sample, initial state and per-physics-step torques."""
+    clock, h = env.clock, env.clock.time_step
+    ctrl = env.handles.controller
+    recorded = []
+    for seed, actions in plans:
+        env.reset(seed=seed)
+        x0 = env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()
+        ctrl_ctx = ctrl.GetMyContextFromRoot(env.context)
+        torques = []
+        for k, action in enumerate(actions):
+            env._action_port.FixValue(env.context, action)
+            for j in range(1, clock.substeps + 1):
+                # AdvanceTo(m h) stops right before the plant update at m h (events at the end
+                # time run at the start of the next call): the controller's output now is the
+                # torque that update uses.
+                env.simulator.AdvanceTo((k * clock.substeps + j) * h)
+                torques.append(np.array(ctrl.GetOutputPort("actuation").Eval(ctrl_ctx)))
+            env.simulator.AdvanceTo(clock.boundary(k + 1))
+        recorded.append((env.episode_info["physics"], x0, np.array(torques),
+                         env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()))
+    return recorded
+
+
+def _run_env(env, plans):
     t0 = time.perf_counter()
-    for _ in range(steps):
-        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 20))
-        torques.append(np.array(ctrl_port.Eval(ctrl_ctx)))
-        if term or trunc:
-            env.reset()
-    return time.perf_counter() - t0, np.array(torques)
+    finals = []
+    for seed, actions in plans:
+        env.reset(seed=seed)
+        for action in actions:
+            env.step(action)  # termination is ignored: the plan fixes the step count
+        finals.append(env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy())
+    return time.perf_counter() - t0, finals
 
 
-def _run_bare(env, torques):
+def _run_bare(env, recorded):
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
 
     from corn_drake.scene.builder import build_scene
+    from corn_drake.scene.randomization import apply_physics
 
+    clock = env.clock
     builder = DiagramBuilder()
     scene = build_scene(builder, env.cfg.scene, env.scene.object_spec)
-    builder.ExportInput(scene.plant.get_actuation_input_port(scene.panda), "tau")
+    dummy = PiecewisePolynomial.ZeroOrderHold([0.0, 1.0], np.zeros((7, 2)))
+    source = builder.AddSystem(TrajectorySource(dummy))
+    builder.Connect(source.get_output_port(), scene.plant.get_actuation_input_port(scene.panda))
     diagram = builder.Build()
     sim = Simulator(diagram)
     ctx = sim.get_mutable_context()
-    # Start from the env's initial state so contacts are comparable.
-    scene.plant.SetPositionsAndVelocities(
-        scene.plant.GetMyMutableContextFromRoot(ctx),
-        env.scene.plant.GetPositionsAndVelocities(env.plant_context))
-    port = diagram.GetInputPort("tau")
-    period = env.cfg.scene.physics.policy_period
-    sim.Initialize()
-    t0 = time.perf_counter()
-    for tau in torques:
-        port.FixValue(ctx, tau)
-        sim.AdvanceTo(ctx.get_time() + period)
-    return time.perf_counter() - t0
+    default = diagram.CreateDefaultContext()
+    plant_ctx = scene.plant.GetMyMutableContextFromRoot(ctx)
+    elapsed, finals = 0.0, []
+    for sample, x0, torques, _ in recorded:
+        # Torque m is used by the plant update at time (m + 1) h.
+        times = clock.time_step * np.arange(1, len(torques) + 2)
+        source.UpdateTrajectory(PiecewisePolynomial.ZeroOrderHold(
+            times, np.vstack([torques, torques[-1:]]).T))
+        ctx.SetTimeStateAndParametersFrom(default)
+        ctx.SetTime(clock.boundary(0))
+        apply_physics(scene, sample, ctx, 1.0)
+        scene.plant.SetPositionsAndVelocities(plant_ctx, x0)
+        sim.Initialize()
+        n_policy = len(torques) // clock.substeps
+        t0 = time.perf_counter()
+        for k in range(n_policy):  # same AdvanceTo pattern as the env: one call per policy step
+            sim.AdvanceTo(clock.boundary(k + 1))
+        elapsed += time.perf_counter() - t0
+        finals.append(scene.plant.GetPositionsAndVelocities(plant_ctx).copy())
+    return elapsed, finals
+
+
+def _profile_env(env, plans) -> list[str]:
+    profiler = cProfile.Profile()
+    profiler.enable()
+    _run_env(env, plans)
+    profiler.disable()
+    stream = io.StringIO()
+    pstats.Stats(profiler, stream=stream).sort_stats("tottime").print_stats(12)
+    return stream.getvalue().splitlines()[:40]
 
 
 def _policy_loop(batch, agent, steps: int) -> float:
@@ -114,34 +172,36 @@ def run(args) -> dict:
     from corn_drake.rl.env import TeacherEnv
 
     env = TeacherEnv(args.config)
-    rng = np.random.default_rng(args.seed)
-    _run_env(env, 20, rng)  # warm-up
-    env_time, torques = _run_env(env, args.steps, rng)
-    bare_time = _run_bare(env, torques)
-    profiler = cProfile.Profile()
-    profiler.enable()
-    _run_env(env, min(args.steps, 200), rng)
-    profiler.disable()
-    stream = io.StringIO()
-    pstats.Stats(profiler, stream=stream).sort_stats("tottime").print_stats(12)
-    env_rate = args.steps / env_time
-    bare_rate = args.steps / bare_time
-    physics = env.cfg.scene.physics
-    extra = {}
-    if args.policy:
-        extra = _policy_results(args, env.cfg)
+    if env.cfg.randomization.object_radius[1] > 0:
+        raise ValueError("bench sim replays torques on a fixed-size object; disable scale randomization")
+    _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
+    plans = _episodes(env, args.steps, args.seed)
+    recorded = _record(env, plans)
+    env_time, env_finals = _run_env(env, plans)
+    bare_time, bare_finals = _run_bare(env, recorded)
+    nq = env.scene.plant.num_positions()
+    replay_error = max(float(np.abs(b[:nq] - e[:nq]).max()) for b, e in zip(bare_finals, env_finals))
+    determinism_error = max(float(np.abs(r[3] - e).max()) for r, e in zip(recorded, env_finals))
+    env_rate, bare_rate = args.steps / env_time, args.steps / bare_time
     result = {
         "policy_steps_per_s": env_rate,
         "bare_physics_policy_steps_per_s": bare_rate,
         "overhead_ratio": bare_rate / env_rate,
-        "physics_steps_per_policy_step": round(physics.policy_period / physics.time_step),
+        "physics_steps_per_policy_step": env.clock.substeps,
         "steps": args.steps,
+        "episodes": len(plans),
         "object": env.scene.object_spec.name,
-        "profile_top_tottime": stream.getvalue().splitlines()[:40],
-        **extra,
+        "torque_backend": env.cfg.controller.torque_backend,
+        # Same trajectories in both runs: final positions of env vs bare replay, and env vs the
+        # recording pass (determinism).
+        "replay_max_position_error": replay_error,
+        "determinism_max_state_error": determinism_error,
+        "profile_top_tottime": _profile_env(env, _episodes(env, min(args.steps, 200), args.seed + 2)),
     }
     if args.policy:
+        extra = _policy_results(args, env.cfg)
+        result.update(extra)
         # With a policy the headline figure is the policy-in-the-loop rate.
-        result["env_only_policy_steps_per_s"] = result["policy_steps_per_s"]
+        result["env_only_policy_steps_per_s"] = env_rate
         result["policy_steps_per_s"] = extra["in_process_policy_steps_per_s"]
     return result

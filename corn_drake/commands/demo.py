@@ -42,7 +42,7 @@ def run(args) -> int:
 
     def on_reset(_obs):
         start = env.episode_info["initial_object_pose"][:3]
-        pushes["policy"] = ScriptedPush(cfg.controller, start[:2], [1.0, 0.3])
+        pushes["policy"] = ScriptedPush.toward_table_centre(cfg.controller, start[:2])
 
     result = run_episode(env, lambda obs: pushes["policy"](obs["hand_state"]), seed=args.seed,
                          max_steps=60, record_path=out / "scripted_push.html", on_reset=on_reset)

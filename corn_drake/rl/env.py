@@ -22,6 +22,7 @@ from corn_drake.scene.randomization import apply_physics, sample_physics, scaled
 from corn_drake.systems.ik import ACTION_DIM, check_action
 from corn_drake.systems.observations import OBS_KEYS
 from corn_drake.systems.reward import STATUS_FIELDS, reset_previous
+from corn_drake.timing import clock_of
 from corn_drake.transforms import quat_wxyz_to_matrix, yaw_matrix
 
 TABLE_MARGIN = 0.95  # objects start within 95 % of the table, minus their radius
@@ -55,7 +56,7 @@ class TeacherEnv(gym.Env):
         self._layout = self.handles.observations.layout
         self._reward_port = self.diagram.GetOutputPort("task.reward")
         self._status_port = self.diagram.GetOutputPort("task.status")
-        self._period = config.scene.physics.policy_period
+        self.clock = clock_of(config.scene.physics)
         self._scale = 1.0
         self.observation_space = gym.spaces.Dict(
             {k: gym.spaces.Box(-np.inf, np.inf, self._layout.shapes[k], np.float32) for k in OBS_KEYS})
@@ -122,6 +123,7 @@ class TeacherEnv(gym.Env):
         h, scene, spec = self.handles, self.scene, self.scene.object_spec
         ctx = self.context
         ctx.SetTimeStateAndParametersFrom(self._default_context)
+        ctx.SetTime(self.clock.boundary(0))
         self._scale = 1.0  # the default context holds the unscaled shapes again
         phys = sample_physics(self.cfg.randomization, scene, rng)
         apply_physics(scene, phys, ctx, self._scale)
@@ -185,7 +187,7 @@ class TeacherEnv(gym.Env):
     def _advance(self):
         info: dict = {}
         try:
-            self.simulator.AdvanceTo(self.context.get_time() + self._period)
+            self.simulator.AdvanceTo(self.clock.boundary(self._steps + 1))
         except RuntimeError as e:  # a solver failure: end the episode, keep the run alive
             info["sim_error"] = str(e)
         state_ok = "sim_error" not in info and np.isfinite(

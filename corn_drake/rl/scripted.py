@@ -53,6 +53,14 @@ class ScriptedPush:
         self.waypoints = [np.array([*start, z + 0.12]), np.array([*start, z]), np.array([*end, z])]
         self.cfg, self.tolerance, self.index = cfg, tolerance, 0
 
+    @classmethod
+    def toward_table_centre(cls, cfg: ControllerConfig, object_xy, distance: float = 0.1,
+                            **kwargs) -> "ScriptedPush":
+        """A push towards the table's centre, so the object stays on the table."""
+        object_xy = np.asarray(object_xy, float)
+        direction = -object_xy if np.linalg.norm(object_xy) > 1e-3 else np.array([1.0, 0.0])
+        return cls(cfg, object_xy, direction, distance=distance, **kwargs)
+
     def __call__(self, hand_state: np.ndarray) -> np.ndarray:
         p = hand_state[:3]
         R = np.column_stack([hand_state[3:6], hand_state[6:9],

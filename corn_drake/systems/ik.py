@@ -5,10 +5,9 @@ kp (7) and damping ratio rho (7). The target EE position is clamped to +- ee_cla
 current EE and to the object's box +- (radius + object_margin); damped least squares gives
 dq = J^T (J J^T + lambda I)^-1 e and q_target = q + dq.
 
-The targets live in discrete state updated periodically at the policy rate, so they are held for
-the 8 physics steps of one policy step. Drake applies simultaneous discrete updates from the
-pre-update state, so a new action reaches the torque law one physics step (12.5 ms) after it is
-latched — a fixed actuation latency, the same in training and evaluation.
+The targets live in discrete state updated periodically at the policy rate (half a physics step
+before the first plant update of a policy step, see corn_drake/timing.py), so they drive exactly
+the 8 physics steps of that policy step.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from corn_drake.config import ControllerConfig
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame
+from corn_drake.timing import PolicyClock
 
 ACTION_DIM = 20
 
@@ -48,7 +48,7 @@ def check_action(action: np.ndarray) -> np.ndarray:
 
 
 class ActionToJointTargets(LeafSystem):
-    def __init__(self, cfg: ControllerConfig, policy_period: float, robot_base: np.ndarray,
+    def __init__(self, cfg: ControllerConfig, clock: PolicyClock, robot_base: np.ndarray,
                  armature=None):
         super().__init__()
         self._cfg = cfg
@@ -64,7 +64,7 @@ class ActionToJointTargets(LeafSystem):
         self.DeclareVectorInputPort("object_radius", 1)
         # [q_target (7), kp (7), kd (7), previous physical action (20)]
         self._state = self.DeclareDiscreteState(3 * n + ACTION_DIM)
-        self.DeclarePeriodicDiscreteUpdateEvent(policy_period, 0.0, self._latch)
+        self.DeclarePeriodicDiscreteUpdateEvent(clock.period, clock.offset, self._latch)
         self.DeclareStateOutputPort("latched", self._state)
         self.DeclareVectorOutputPort("q_target", n, self._calc_q_target, {self.discrete_state_ticket(self._state)})
         self.DeclareVectorOutputPort("gains", 2 * n, self._calc_gains, {self.discrete_state_ticket(self._state)})

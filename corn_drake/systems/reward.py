@@ -20,6 +20,7 @@ from pydrake.systems.primitives import Multiplexer, ZeroOrderHold
 
 from corn_drake.config import TaskConfig
 from corn_drake.systems.observations import object_pose_from_state
+from corn_drake.timing import PolicyClock
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
 STATUS_FIELDS = ("success", "out_of_workspace", "position_error", "orientation_error")
@@ -93,8 +94,7 @@ class TaskReward(LeafSystem):
         output.SetFromVector(self.status(context))
 
 
-def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, policy_period: float,
-                    physics_time_step: float, object_state: OutputPort, hand_state: OutputPort, energy: OutputPort,
+def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, clock: PolicyClock, object_state: OutputPort, hand_state: OutputPort, energy: OutputPort,
                     name: str = "task") -> tuple[TaskReward, ZeroOrderHold]:
     """TaskReward plus the hold of the previous policy step's state; returns (reward, hold).
 
@@ -102,10 +102,10 @@ def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, policy_period: flo
     into a context, call `reset_previous(hold, reward, context)` so the first step's reward
     starts from it.
     """
-    substeps = round(policy_period / physics_time_step)
-    reward = builder.AddNamedSystem(name, TaskReward(cfg, substeps))
+    reward = builder.AddNamedSystem(name, TaskReward(cfg, clock.substeps))
     mux = builder.AddNamedSystem(f"{name}.previous_inputs", Multiplexer([13, 9, 1]))
-    hold = builder.AddNamedSystem(f"{name}.previous", ZeroOrderHold(policy_period, PREVIOUS_SIZE))
+    hold = builder.AddNamedSystem(f"{name}.previous", ZeroOrderHold(clock.period, PREVIOUS_SIZE,
+                                                                   clock.offset))
     for i, port in enumerate((object_state, hand_state, energy)):
         builder.Connect(port, mux.get_input_port(i))
     builder.Connect(object_state, reward.GetInputPort("object_state"))

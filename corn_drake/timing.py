@@ -1,0 +1,44 @@
+"""When the policy acts, relative to the physics steps.
+
+The plant steps at m * h (h = physics time step). Policy-rate events (the action latch, the
+reward's hold) run at offset + n * period with offset = h / 2: half-way between two physics
+steps, so they never tie with a plant update (ties made the action's latency 0 or 1 physics
+step depending on floating-point rounding of n * 0.1 vs 8n * 0.0125). An episode starts at time
+`offset`; the n-th policy step ends at `boundary(n)`, computed exactly as Drake computes its
+periodic event times (offset + n * period), so an AdvanceTo there stops right before the latch
+and the next action is fixed in time for it. Each action then drives exactly the next
+`substeps` plant updates, with no latency.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyClock:
+    period: float
+    time_step: float
+
+    def __post_init__(self):
+        ratio = self.period / self.time_step
+        if self.time_step <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"policy_period {self.period} must be a whole multiple of the physics "
+                             f"time_step {self.time_step}")
+
+    @property
+    def offset(self) -> float:
+        return self.time_step / 2
+
+    @property
+    def substeps(self) -> int:
+        return round(self.period / self.time_step)
+
+    def boundary(self, n: int) -> float:
+        """Time at which policy step n ends (n = 0: the episode's start)."""
+        return self.offset + n * self.period
+
+
+def clock_of(physics) -> PolicyClock:
+    """The PolicyClock of a PhysicsConfig."""
+    return PolicyClock(physics.policy_period, physics.time_step)
