@@ -1,0 +1,49 @@
+"""The paper's `pn` baseline: a 3-layer PointNet pretrained on point-wise contact (pure torch).
+
+Each point, concatenated with the gripper pose (9), goes through a shared MLP 12 -> 64 -> 128 ->
+1024 (Linear-LN-ReLU on channels-last tensors, faster than Conv1d on CPU); max-pooling gives the
+global feature the `pn` policy uses. The contact head classifies every point from
+[its 64-D feature, the global feature]. Big batches run in chunks to bound memory.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+class PointNetEncoder(nn.Module):
+    def __init__(self, hand_dim: int = 9, widths=(64, 128, 1024), chunk: int = 256):
+        super().__init__()
+        sizes = [3 + hand_dim, *widths]
+        self.layers = nn.ModuleList(
+            nn.Sequential(nn.Linear(a, b), nn.LayerNorm(b), nn.ReLU()) for a, b in zip(sizes, sizes[1:]))
+        self.feature_dim, self.chunk = widths[-1], chunk
+
+    def point_features(self, points: torch.Tensor, hand: torch.Tensor):
+        """(first-layer per-point features (B, N, 64), global feature (B, F))."""
+        x = torch.cat([points, hand.unsqueeze(1).expand(-1, points.shape[1], -1)], dim=-1)
+        x = first = self.layers[0](x)
+        for layer in self.layers[1:]:
+            x = layer(x)
+        return first, x.max(dim=1).values
+
+    def forward(self, points: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+        """Global feature (B, F), computed `chunk` clouds at a time."""
+        return torch.cat([self.point_features(p, h)[1]
+                          for p, h in zip(points.split(self.chunk), hand.split(self.chunk))])
+
+
+class PointNetContactModel(nn.Module):
+    def __init__(self, encoder: PointNetEncoder | None = None):
+        super().__init__()
+        self.encoder = encoder or PointNetEncoder()
+        first = self.encoder.layers[0][0].out_features
+        self.head = nn.Sequential(nn.Linear(first + self.encoder.feature_dim, 128), nn.ReLU(),
+                                  nn.Linear(128, 1))
+
+    def forward(self, points: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+        """Per-point contact logits (B, N)."""
+        first, pooled = self.encoder.point_features(points, hand)
+        x = torch.cat([first, pooled.unsqueeze(1).expand(-1, points.shape[1], -1)], dim=-1)
+        return self.head(x).squeeze(-1)
