@@ -21,10 +21,17 @@ class PhysicsConfig:
     policy_period: float = 0.1
     discrete_contact_approximation: str = "sap"
     contact_model: str = "hydroelastic_with_fallback"
-    # Compliant-hydroelastic object on a rigid table. 1e7 Pa blew up at 12.5 ms in probes;
-    # 1e6 kicked a resting box 2.5 mm / 0.014 rad on its first step here; 1e5 sinks 0.2 mm and
-    # stays put (tests/test_scene_physics.py).
+    # Used when the object is the compliant side: 1e7 Pa blew up at 12.5 ms in probes, 1e6
+    # kicked a resting box 2.5 mm on its first step, 1e5 rested within 0.3 mm.
     object_hydroelastic_modulus: float = 1.0e5
+    # Which side of object-table contact is compliant: "object" (compliant hulls on a rigid
+    # table) or "table" (rigid hulls on a compliant table). Thin hulls (plates, books) made
+    # compliant blew up at 12.5 ms (21 of 24 drops of a 1.5 cm plate); with a 1e6 Pa table,
+    # 3 of 24 failed and resting objects stay within 0.3 mm (1e5: 2.8 mm sink; 1e7: more
+    # drop failures). The table being compliant keeps every object's contact a patch.
+    compliant_body: str = "table"
+    table_hydroelastic_modulus: float = 1.0e6
+    table_resolution_hint: float = 0.02
     object_hunt_crossley_dissipation: float = 5.0
     # Reflected rotor inertia and damping from the authors' system identification.
     armature: list[float] = dc.field(
@@ -160,6 +167,27 @@ class TrainConfig:
     encoder: str = ""  # frozen encoder checkpoint for corn / pn
     ppo: PPOConfig = dc.field(default_factory=PPOConfig)
     env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
+
+
+
+@dc.dataclass
+class PretrainConfig:
+    """Contact pretraining (paper: AdamW 2e-4, wd 5e-4, batch 1024, cosine schedule + warm-up)."""
+    model: str = "corn"  # corn | pointnet
+    steps: int = 2000
+    batch_size: int = 1024
+    lr: float = 2e-4
+    min_lr: float = 1e-6
+    weight_decay: float = 5e-4
+    warmup_steps: int = 100
+    max_grad_norm: float = 4.0
+    # Augmentation (train split only): yaw about the cloud centroid, translation, point noise.
+    translate_std: float = 0.04  # m (0.1 in normalised units)
+    point_noise_std: float = 0.004  # m (0.01 in normalised units)
+    eval_every: int = 250
+    checkpoint_every: int = 250
+    eval_samples: int = 4096
+    seed: int = 0
 
 
 def load_config(path: str | Path, schema: type[T]) -> T:

@@ -43,6 +43,8 @@ class TeacherEnv(gym.Env):
             config = load_teacher_config(config)
         self.cfg = config
         self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent)
+        if len(self.handles.scene.object_spec.stable_poses) == 0:
+            raise ValueError(f"object {self.handles.scene.object_spec.name} has no stable poses")
         self.meshcat = meshcat
         self.diagram = self.handles.diagram
         self.scene = self.handles.scene

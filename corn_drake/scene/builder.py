@@ -46,15 +46,36 @@ def friction_properties(mu: float) -> ProximityProperties:
     return props
 
 
+def _check_compliant_body(cfg: SceneConfig) -> str:
+    if cfg.physics.compliant_body not in ("object", "table"):
+        raise ValueError(f"physics.compliant_body must be 'object' or 'table', "
+                         f"got {cfg.physics.compliant_body!r}")
+    return cfg.physics.compliant_body
+
+
 def object_proximity_properties(cfg: SceneConfig, mu: float) -> ProximityProperties:
     props = ProximityProperties()
     AddContactMaterial(dissipation=cfg.physics.object_hunt_crossley_dissipation,
                        friction=CoulombFriction(mu, mu), properties=props)
-    # Compliant hulls against the rigid table: a resting box gets a contact patch instead of a
-    # single rocking point (measured: point contact rocked 0.09 rad in 1 s).
-    AddCompliantHydroelasticProperties(resolution_hint=0.01,
-                                       hydroelastic_modulus=cfg.physics.object_hydroelastic_modulus,
-                                       properties=props)
+    # One side of object-table contact is compliant, so a resting object gets a contact patch
+    # instead of a single rocking point (measured: point contact rocked 0.09 rad in 1 s).
+    if _check_compliant_body(cfg) == "object":
+        AddCompliantHydroelasticProperties(
+            resolution_hint=0.01, hydroelastic_modulus=cfg.physics.object_hydroelastic_modulus,
+            properties=props)
+    else:
+        AddRigidHydroelasticProperties(0.01, props)  # the hint meshes rigid primitives
+    return props
+
+
+def table_proximity_properties(cfg: SceneConfig, mu: float) -> ProximityProperties:
+    props = friction_properties(mu)
+    if _check_compliant_body(cfg) == "table":
+        AddCompliantHydroelasticProperties(
+            resolution_hint=cfg.physics.table_resolution_hint,
+            hydroelastic_modulus=cfg.physics.table_hydroelastic_modulus, properties=props)
+    else:
+        AddRigidHydroelasticProperties(props)
     return props
 
 
@@ -69,11 +90,10 @@ def object_shapes(spec: ObjectSpec, scale: float = 1.0):
     return [Convex(str(p), scale) for p in spec.hull_paths]
 
 
-def _add_table(plant: MultibodyPlant, size) -> list[GeometryId]:
-    size = np.asarray(size, float)
+def _add_table(plant: MultibodyPlant, cfg: SceneConfig) -> list[GeometryId]:
+    size = np.asarray(cfg.table_size, float)
     X = RigidTransform([0.0, 0.0, TABLE_TOP_Z - size[2] / 2])
-    props = friction_properties(DEFAULT_TABLE_FRICTION)
-    AddRigidHydroelasticProperties(props)
+    props = table_proximity_properties(cfg, DEFAULT_TABLE_FRICTION)
     shape = Box(*size)
     gid = plant.RegisterCollisionGeometry(plant.world_body(), X, shape, TABLE_NAME, props)
     plant.RegisterVisualGeometry(plant.world_body(), X, shape, TABLE_NAME, [0.55, 0.4, 0.3, 1.0])
@@ -97,6 +117,22 @@ def _add_object(plant: MultibodyPlant, cfg: SceneConfig, spec: ObjectSpec):
     return instance, body, gids
 
 
+def build_table_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec):
+    """Table + the free object only (no robot): for drop tests of stable poses.
+
+    Returns (plant, scene_graph, object body); the plant is finalized.
+    """
+    plant_config = MultibodyPlantConfig(
+        time_step=cfg.physics.time_step,
+        discrete_contact_approximation=cfg.physics.discrete_contact_approximation,
+        contact_model=cfg.physics.contact_model, use_sampled_output_ports=False)
+    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    _add_table(plant, cfg)
+    _, body, _ = _add_object(plant, cfg, spec)
+    plant.Finalize()
+    return plant, scene_graph, body
+
+
 def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> Scene:
     """Adds plant + scene graph to `builder`; the plant is finalized on return."""
     plant_config = MultibodyPlantConfig(
@@ -113,7 +149,7 @@ def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> 
     if not cfg.physics.gravity_on_robot:
         # As in the paper's simulation: the torque law has no gravity term.
         plant.set_gravity_enabled(panda, False)
-    table_gids = _add_table(plant, cfg.table_size)
+    table_gids = _add_table(plant, cfg)
     instance, body, object_gids = _add_object(plant, cfg, spec)
     plant.Finalize()
 

@@ -43,8 +43,9 @@ class ObjectSpec:
                 raise FileNotFoundError(f"object {self.name}: mesh file not found: {p}")
         if self.cloud.ndim != 2 or self.cloud.shape[1] != 6 or not np.isfinite(self.cloud).all():
             raise ValueError(f"object {self.name}: cloud must be finite (N, 6), got {self.cloud.shape}")
-        if self.stable_poses.ndim != 2 or self.stable_poses.shape[1] != 7 or len(self.stable_poses) == 0:
-            raise ValueError(f"object {self.name}: stable_poses must be (K>0, 7)")
+        # Empty is allowed (an object whose stable poses are being computed); envs need K > 0.
+        if self.stable_poses.ndim != 2 or self.stable_poses.shape[1] != 7:
+            raise ValueError(f"object {self.name}: stable_poses must be (K, 7)")
 
 
 def _corners(half: np.ndarray) -> np.ndarray:

@@ -15,7 +15,8 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from corn_drake.config import RandomizationConfig
 from corn_drake.scene.builder import (DEFAULT_OBJECT_FRICTION, DEFAULT_TABLE_FRICTION, Scene,
-                                      friction_properties, object_proximity_properties, object_shapes)
+                                      friction_properties, object_proximity_properties, object_shapes,
+                                      table_proximity_properties)
 from corn_drake.scene.objects import TABLE_TOP_Z
 
 DEFAULT_FINGER_FRICTION = 1.0
@@ -84,8 +85,9 @@ def apply_physics(scene: Scene, sample: PhysicsSample, root_context, current_sca
     obj_props = object_proximity_properties(scene.config, sample.object_friction)
     for gid in scene.object_geometries:
         sg.AssignRole(sg_ctx, source, gid, obj_props, RoleAssign.kReplace)
+    table_props = table_proximity_properties(scene.config, sample.table_friction)
     for gid in scene.table_geometries:
-        sg.AssignRole(sg_ctx, source, gid, _rigid_props(sample.table_friction), RoleAssign.kReplace)
+        sg.AssignRole(sg_ctx, source, gid, table_props, RoleAssign.kReplace)
     for gid in scene.finger_geometries:
         sg.AssignRole(sg_ctx, source, gid, _rigid_props(sample.finger_friction), RoleAssign.kReplace)
 

@@ -1,0 +1,135 @@
+"""The object library on disk: building it (procedural or from a mesh folder) and reading it.
+
+DIR/manifest.json: {"objects": [{id, source, family, split, radius, mass, thin, hulls, visual,
+cloud, stable_poses, ...}], "rejected": [{source, reason}], "timings": {...}}. Paths are relative
+to DIR; every file is written atomically, and a re-run skips objects already in the manifest.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
+from corn_drake.assets.ingest import Rejected, find_mesh_files, load_watertight
+from corn_drake.assets.process import ProcessConfig, process_object
+from corn_drake.io_utils import write_json
+from corn_drake.scene.objects import ObjectSpec
+
+UNSEEN_EVERY = 8  # besides whole unseen families, 1 in 8 members of the others is unseen
+
+
+def read_manifest(library: str | Path) -> dict:
+    path = Path(library) / "manifest.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"object library {library}: no manifest.json")
+    return json.loads(path.read_text())
+
+
+def list_objects(library: str | Path, split: str | None = None) -> list[str]:
+    return [o["id"] for o in read_manifest(library)["objects"] if split in (None, o["split"])]
+
+
+def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
+    library = Path(library)
+    entries = {o["id"]: o for o in read_manifest(library)["objects"]}
+    if object_id not in entries:
+        raise KeyError(f"object {object_id!r} not in library {library}")
+    e = entries[object_id]
+    return ObjectSpec(name=object_id, mass=float(e["mass"]),
+                      unit_inertia=np.load(library / e["unit_inertia"]), com=np.zeros(3),
+                      cloud=np.load(library / e["cloud"]),
+                      stable_poses=np.load(library / e["stable_poses"]), radius=float(e["radius"]),
+                      bbox_corners=np.load(library / e["bbox_corners"]),
+                      hull_paths=[library / h for h in e["hulls"]],
+                      visual_path=library / e["visual"], thin=bool(e["thin"]))
+
+
+def _save(out: Path, manifest: dict) -> None:
+    write_json(out / "manifest.json", manifest)
+
+
+def _load_or_new(out: Path) -> dict:
+    if (out / "manifest.json").is_file():
+        return read_manifest(out)
+    return {"objects": [], "rejected": [], "timings": {}}
+
+
+def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
+    fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
+    if fields["num_stable_poses"] == 0:
+        manifest["rejected"].append({"source": entry["source"], "reason": "no stable pose found"})
+        return
+    manifest["objects"].append({**entry, **fields})
+
+
+def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
+                     progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    out, cfg = Path(out), cfg or ProcessConfig()
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _load_or_new(out)
+    done = {o["id"] for o in manifest["objects"]} | {r["source"] for r in manifest["rejected"]}
+    families = sorted(FAMILIES)
+    t0 = time.perf_counter()
+    for i in tqdm(range(num), disable=not progress, desc="objects"):
+        family = families[i % len(families)]
+        member = i // len(families)
+        object_id = f"{family}_{member:03d}"
+        if object_id in done:
+            continue
+        obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
+        rng = np.random.default_rng(obj_seed)
+        unseen = family in UNSEEN_FAMILIES or member % UNSEEN_EVERY == UNSEEN_EVERY - 1
+        entry = {"id": object_id, "source": f"procedural:{family}:{obj_seed}", "family": family,
+                 "split": "unseen" if unseen else "train"}
+        try:
+            mesh = make_family_mesh(family, obj_seed)
+        except ValueError as e:
+            manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
+            continue
+        _add(out, manifest, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
+        _save(out, manifest)  # after every object: a killed run resumes here
+    manifest["timings"]["build_s"] = manifest["timings"].get("build_s", 0.0) + time.perf_counter() - t0
+    _save(out, manifest)
+    return manifest
+
+
+def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
+                  cfg: ProcessConfig | None = None, progress: bool = True,
+                  unseen_fraction: float = 0.2) -> dict:
+    from tqdm import tqdm
+
+    source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
+    if not source.is_dir():
+        raise FileNotFoundError(f"mesh folder not found: {source}")
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _load_or_new(out)
+    done = {o["source"] for o in manifest["objects"]} | {r["source"] for r in manifest["rejected"]}
+    for path in tqdm(find_mesh_files(source), disable=not progress, desc="ingest"):
+        rel = str(path.relative_to(source))
+        if rel in done:
+            continue
+        obj_seed = zlib.crc32(f"{seed}:{rel}".encode())
+        rng = np.random.default_rng(obj_seed)
+        try:
+            mesh, warnings = load_watertight(path)
+        except Rejected as e:
+            manifest["rejected"].append({"source": rel, "reason": str(e)})
+            _save(out, manifest)
+            continue
+        object_id = "mesh_" + "".join(c if c.isalnum() else "_" for c in Path(rel).with_suffix("").as_posix())
+        entry = {"id": object_id, "source": rel, "family": "ingested", "warnings": warnings,
+                 "split": "unseen" if rng.uniform() < unseen_fraction else "train"}
+        convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
+        try:
+            _add(out, manifest, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
+        except Exception as e:  # one bad object must not end the run
+            manifest["rejected"].append({"source": rel, "reason": f"processing failed: {e}"})
+        _save(out, manifest)
+    return manifest

@@ -1,0 +1,95 @@
+"""One watertight mesh -> one library object: normalised, decomposed, sampled, dropped."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from corn_drake.assets.decompose import DecompositionConfig, convex_decomposition
+from corn_drake.assets.stable_poses import DropConfig, find_stable_poses
+from corn_drake.io_utils import atomic_path, save_npy
+from corn_drake.scene.objects import ObjectSpec
+
+
+@dataclasses.dataclass
+class ProcessConfig:
+    radius: tuple[float, float] = (0.05, 0.10)  # the paper's object-radius range (m)
+    density: float = 300.0  # kg/m^3, the authors' DexGraspNet conversion
+    cloud_points: int = 2048
+    thin_ratio: float = 2.5
+    decomposition: DecompositionConfig = dataclasses.field(default_factory=DecompositionConfig)
+    drops: DropConfig = dataclasses.field(default_factory=DropConfig)
+
+
+def normalise(mesh: trimesh.Trimesh, radius: float) -> trimesh.Trimesh:
+    """Centre on the volume centroid and scale so the max vertex distance is `radius`."""
+    mesh = mesh.copy()
+    mesh.apply_translation(-mesh.center_mass)
+    mesh.apply_scale(radius / np.linalg.norm(mesh.vertices, axis=1).max())
+    return mesh
+
+
+def _write_obj(path: Path, mesh: trimesh.Trimesh) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(trimesh.exchange.obj.export_obj(mesh, include_normals=False,
+                                                       include_texture=False))
+
+
+def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.random.Generator,
+                   cfg: ProcessConfig, convex: bool, cache_dir: Path | None) -> dict:
+    """Writes the object's files under out/object_id; returns its manifest entry fields."""
+    timings = {}
+    t = time.perf_counter()
+    mesh = normalise(mesh, rng.uniform(*cfg.radius))
+    radius = float(np.linalg.norm(mesh.vertices, axis=1).max())
+    hulls = [mesh.convex_hull] if convex else convex_decomposition(mesh, cfg.decomposition, cache_dir)
+    timings["decompose_s"] = time.perf_counter() - t
+    union_volume = _union_volume(hulls)
+    t = time.perf_counter()
+    points, faces = trimesh.sample.sample_surface(mesh, cfg.cloud_points, seed=int(rng.integers(1 << 31)))
+    cloud = np.concatenate([points, mesh.face_normals[faces]], axis=1)
+    extents = np.sort(mesh.bounding_box_oriented.primitive.extents)
+    mass = float(cfg.density * mesh.volume)
+    lo, hi = mesh.bounds
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    folder = out / object_id
+    folder.mkdir(parents=True, exist_ok=True)
+    hull_paths = []
+    for i, hull in enumerate(hulls):
+        _write_obj(folder / f"hull_{i:02d}.obj", hull)
+        hull_paths.append(folder / f"hull_{i:02d}.obj")
+    _write_obj(folder / "visual.obj", mesh)
+    save_npy(folder / "cloud.npy", cloud.astype(np.float64))
+    spec = ObjectSpec(name=object_id, mass=mass, unit_inertia=mesh.moment_inertia / mesh.mass,
+                      com=np.zeros(3), cloud=cloud, stable_poses=np.zeros((0, 7)), radius=radius,
+                      bbox_corners=corners, hull_paths=hull_paths)
+    t_drop = time.perf_counter()
+    poses, drop_stats = find_stable_poses(spec, np.concatenate([h.vertices for h in hulls]), rng,
+                                          cfg.drops)
+    timings["stable_poses_s"] = time.perf_counter() - t_drop
+    save_npy(folder / "stable_poses.npy", poses)
+    save_npy(folder / "bbox_corners.npy", corners)
+    save_npy(folder / "unit_inertia.npy", np.asarray(mesh.moment_inertia / mesh.mass))
+    timings["total_s"] = time.perf_counter() - t
+    return {"radius": radius, "mass": mass, "thin": bool(extents[1] >= cfg.thin_ratio * extents[0]),
+            "hulls": [f"{object_id}/{p.name}" for p in hull_paths], "visual": f"{object_id}/visual.obj",
+            "cloud": f"{object_id}/cloud.npy", "stable_poses": f"{object_id}/stable_poses.npy",
+            "bbox_corners": f"{object_id}/bbox_corners.npy",
+            "unit_inertia": f"{object_id}/unit_inertia.npy",
+            "num_hulls": len(hulls), "num_stable_poses": int(len(poses)), "drops": drop_stats,
+            "hull_volume_ratio": union_volume / float(mesh.volume), "timings": timings}
+
+
+def _union_volume(hulls: list[trimesh.Trimesh]) -> float:
+    import manifold3d as mf
+
+    total = None
+    for h in hulls:
+        m = mf.Manifold(mf.Mesh(vert_properties=np.asarray(h.vertices, np.float32),
+                                tri_verts=np.asarray(h.faces, np.uint32)))
+        total = m if total is None else total + m
+    return float(total.volume())

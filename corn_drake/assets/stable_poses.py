@@ -1,0 +1,140 @@
+"""Stable resting poses found by dropping the object's hulls on the table in Drake.
+
+80 % of drops start in a uniformly random orientation, 20 % in canonical ones (each principal
+axis up or down), from 0.2 m above the table. A drop counts when the object stays still for 10
+consecutive physics steps and its centre of mass projects inside its support polygon (the hull
+vertices touching the table). Poses are deduplicated modulo yaw by the gravity direction in the
+object frame and stored canonicalised: yaw removed, above (0, 0), table top at z = 0.4.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from scipy.spatial import ConvexHull, Delaunay
+
+from corn_drake.config import SceneConfig
+from corn_drake.scene.builder import build_table_scene
+from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
+from corn_drake.transforms import yaw_matrix
+
+
+@dataclasses.dataclass
+class DropConfig:
+    drops: int = 128
+    canonical_fraction: float = 0.2
+    height: float = 0.2
+    max_time: float = 3.0
+    still_steps: int = 10
+    still_linear: float = 2e-3  # m/s
+    still_angular: float = 2e-2  # rad/s
+    support_tolerance: float = 2e-3  # hull vertices this close to the table support the object
+    duplicate_angle: float = 0.1  # rad between gravity directions of distinct poses
+
+
+def _random_rotation(rng) -> np.ndarray:
+    q = rng.normal(size=4)
+    return RotationMatrix(_quat(q / np.linalg.norm(q))).matrix()
+
+
+def _quat(q):
+    from pydrake.common.eigen_geometry import Quaternion
+
+    return Quaternion(q)
+
+
+def _canonical_rotations() -> list[np.ndarray]:
+    out = []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            v = np.zeros(3)
+            v[axis] = sign  # this object axis points down
+            out.append(_rotation_taking(v, np.array([0.0, 0.0, -1.0])))
+    return out
+
+
+def _rotation_taking(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A rotation R with R a = b (unit vectors)."""
+    v, c = np.cross(a, b), float(a @ b)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0]) if abs(a[0]) < 0.9 else np.diag([-1.0, 1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
+def _remove_yaw(R: np.ndarray) -> np.ndarray:
+    """Rotate about world z so the object's x axis (or y, if x is vertical) points along world x."""
+    axis = R[:, 0] if np.hypot(*R[:2, 0]) > 0.1 else R[:, 1]
+    return yaw_matrix(-np.arctan2(axis[1], axis[0])) @ R
+
+
+def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Generator,
+                      cfg: DropConfig = DropConfig(), scene_cfg: SceneConfig | None = None):
+    """(poses (K, 7), stats). `vertices` are the hulls' vertices in the object frame."""
+    scene_cfg = scene_cfg or SceneConfig()
+    builder = DiagramBuilder()
+    plant, _, body = build_table_scene(builder, scene_cfg, spec)
+    diagram = builder.Build()
+    sim = Simulator(diagram)
+    ctx = sim.get_mutable_context()
+    default = diagram.CreateDefaultContext()
+    pc = plant.GetMyMutableContextFromRoot(ctx)
+    h = scene_cfg.physics.time_step
+    canonical = _canonical_rotations()
+    n_canonical = int(round(cfg.drops * cfg.canonical_fraction))
+    kept_R, kept_z, settled, supported, failed = [], [], 0, 0, 0
+    for i in range(cfg.drops):
+        R0 = canonical[i % len(canonical)] if i < n_canonical else _random_rotation(rng)
+        ctx.SetTimeStateAndParametersFrom(default)
+        lowest = (vertices @ R0.T)[:, 2].min()
+        plant.SetFreeBodyPose(pc, body, RigidTransform(RotationMatrix(R0),
+                                                       [0, 0, TABLE_TOP_Z + cfg.height - lowest]))
+        sim.Initialize()
+        still, t = 0, 0.0
+        try:
+            while t < cfg.max_time and still < cfg.still_steps:
+                t += h
+                sim.AdvanceTo(t)
+                v = plant.GetVelocities(pc)
+                still = still + 1 if (np.linalg.norm(v[3:]) < cfg.still_linear
+                                      and np.linalg.norm(v[:3]) < cfg.still_angular) else 0
+        except RuntimeError:  # the contact solver diverged on this drop: it proves nothing
+            failed += 1
+            continue
+        if still < cfg.still_steps:
+            continue
+        settled += 1
+        X = plant.EvalBodyPoseInWorld(pc, body)
+        R, p = X.rotation().matrix(), X.translation()
+        world = vertices @ R.T + p
+        contact = world[world[:, 2] < TABLE_TOP_Z + cfg.support_tolerance][:, :2]
+        com = R @ spec.com + p
+        if len(contact) < 3 or not _inside_polygon(com[:2], contact):
+            continue
+        supported += 1
+        g = R.T @ np.array([0.0, 0.0, -1.0])  # gravity in the object frame
+        if any(np.arccos(np.clip(g @ (Rk.T @ [0, 0, -1.0]), -1, 1)) < cfg.duplicate_angle
+               for Rk in kept_R):
+            continue
+        kept_R.append(_remove_yaw(R))
+        kept_z.append(p[2])
+    poses = np.array([[0.0, 0.0, z, *_wxyz(R)] for R, z in zip(kept_R, kept_z)]).reshape(-1, 7)
+    return poses, {"drops": cfg.drops, "settled": settled, "supported": supported,
+                   "unique": len(poses), "solver_failures": failed}
+
+
+def _wxyz(R: np.ndarray) -> np.ndarray:
+    q = RotationMatrix(R).ToQuaternion()
+    return np.array([q.w(), q.x(), q.y(), q.z()])
+
+
+def _inside_polygon(point: np.ndarray, pts: np.ndarray) -> bool:
+    try:
+        hull = ConvexHull(pts)
+    except Exception:  # all contact points on a line: an edge cannot support the CoM
+        return False
+    return bool(Delaunay(pts[hull.vertices]).find_simplex(point) >= 0)

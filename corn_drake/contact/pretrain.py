@@ -1,0 +1,231 @@
+"""Contact pretraining of the CORN encoder (and the PointNet baseline) on contact-data shards.
+
+The CORN model predicts, per patch (16 FPS centres x 32 sorted neighbours), whether the gripper
+touches it; a patch is positive if any of its points is inside the gripper. The PointNet baseline
+predicts per point; its patch predictions are the max over the same patches, so both get the
+same patch-level metrics. Run folder: config.yaml, checkpoints/last.pt (atomic, resumable to the
+same step), tb/, metrics.json, plots/predictions.png, encoder.pt (frozen-encoder export).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from corn_drake.config import PretrainConfig
+from corn_drake.contact.shards import load_split
+from corn_drake.io_utils import atomic_path, write_json
+from corn_drake.nn.encoder import CORNContactModel
+from corn_drake.nn.encoder_io import save_encoder
+from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
+from corn_drake.nn.metrics import binary_metrics
+from corn_drake.nn.patchify import gather_points, patch_indices
+from corn_drake.nn.pointnet import PointNetContactModel
+
+CENTER = torch.tensor([0.0, 0.0, 0.55])
+SCALE = 0.4
+
+
+def hand9(hand_pose: torch.Tensor) -> torch.Tensor:
+    """Tool pose (B, 7: xyz + wxyz) -> normalised position + 6D rotation (B, 9)."""
+    return torch.cat([(hand_pose[:, :3] - CENTER) / SCALE, rot6d(quat_wxyz_to_matrix(hand_pose[:, 3:]))], -1)
+
+
+def augment(points, hand_pose, cfg: PretrainConfig, g: torch.Generator):
+    """Random yaw about the cloud centroid and a translation, applied to cloud and gripper alike,
+    then point noise on the cloud."""
+    B = points.shape[0]
+    center = points.mean(1, keepdim=True)
+    R = yaw_matrix(torch.rand(B, generator=g) * 2 * math.pi)
+    shift = torch.randn(B, 1, 3, generator=g) * cfg.translate_std
+    points = (points - center) @ R.transpose(1, 2) + center + shift
+    hand_R = R @ quat_wxyz_to_matrix(hand_pose[:, 3:])
+    hand_p = ((hand_pose[:, None, :3] - center) @ R.transpose(1, 2) + center + shift)[:, 0]
+    points = points + torch.randn(points.shape, generator=g) * cfg.point_noise_std
+    hand = torch.cat([(hand_p - CENTER) / SCALE, rot6d(hand_R)], -1)
+    return (points - CENTER) / SCALE, hand
+
+
+def prepare(points, hand_pose, cfg, g=None):
+    """Normalised (points, 9-D hand) for the encoder; augmented when a generator is given."""
+    points, hand_pose = points.float(), hand_pose.float()
+    if g is not None:
+        return augment(points, hand_pose, cfg, g)
+    return (points - CENTER) / SCALE, hand9(hand_pose)
+
+
+def patch_labels(labels: torch.Tensor, knn_idx: torch.Tensor) -> torch.Tensor:
+    """(B, G): a patch is in contact if any of its points is."""
+    return gather_points(labels.unsqueeze(-1).float(), knn_idx)[..., 0].amax(-1) > 0.5
+
+
+class Pretrainer:
+    def __init__(self, cfg: PretrainConfig, data: str | Path, out: str | Path):
+        if cfg.model not in ("corn", "pointnet"):
+            raise ValueError(f"model must be corn or pointnet, got {cfg.model!r}")
+        self.cfg, self.out, self.data = cfg, Path(out), Path(data)
+        torch.manual_seed(cfg.seed)
+        self.model = CORNContactModel() if cfg.model == "corn" else PointNetContactModel()
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr,
+                                           weight_decay=cfg.weight_decay)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.step, self.history, self.initial_loss = 0, [], None
+        self.train_set = {k: torch.from_numpy(v) for k, v in load_split(self.data, "train").items()
+                          if k in ("points", "labels", "hand_pose")}
+        self.checkpoint = self.out / "checkpoints" / "last.pt"
+        if self.checkpoint.exists():
+            state = torch.load(self.checkpoint, weights_only=False)
+            self.model.load_state_dict(state["model"])
+            self.optimizer.load_state_dict(state["optimizer"])
+            self.generator.set_state(state["generator"])
+            self.step, self.history = state["step"], state["history"]
+
+    def lr_at(self, step: int) -> float:
+        c = self.cfg
+        if step < c.warmup_steps:
+            return c.lr * (step + 1) / c.warmup_steps
+        t = (step - c.warmup_steps) / max(c.steps - c.warmup_steps, 1)
+        return c.min_lr + 0.5 * (c.lr - c.min_lr) * (1 + math.cos(math.pi * min(t, 1.0)))
+
+    def _forward(self, points, hand, labels):
+        """(patch logits, patch labels, loss)."""
+        if self.cfg.model == "corn":
+            logits, (_, knn) = self.model(points, hand)
+            targets = patch_labels(labels, knn)
+            return logits, targets, nn.functional.binary_cross_entropy_with_logits(logits, targets.float())
+        point_logits = self.model(points, hand)
+        loss = nn.functional.binary_cross_entropy_with_logits(point_logits, labels.float())
+        _, knn = patch_indices(points)
+        logits = gather_points(point_logits.unsqueeze(-1), knn)[..., 0].amax(-1)
+        return logits, patch_labels(labels, knn), loss
+
+    def _save(self):
+        state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
+                 "generator": self.generator.get_state(), "step": self.step,
+                 "history": self.history, "model_kind": self.cfg.model}
+        with atomic_path(self.checkpoint) as tmp:
+            torch.save(state, tmp)
+
+    @torch.no_grad()
+    def evaluate(self, split: str) -> dict:
+        try:
+            data = load_split(self.data, split)
+        except ValueError:
+            return {}
+        n = min(self.cfg.eval_samples, len(data["points"]))
+        self.model.eval()
+        logits, targets = [], []
+        for i in range(0, n, 512):
+            sl = slice(i, min(i + 512, n))
+            pts, hand = prepare(torch.from_numpy(data["points"][sl]), torch.from_numpy(data["hand_pose"][sl]), self.cfg)
+            lg, tg, _ = self._forward(pts, hand, torch.from_numpy(data["labels"][sl]))
+            logits.append(lg)
+            targets.append(tg)
+        self.model.train()
+        return binary_metrics(torch.cat(logits), torch.cat(targets))
+
+    def train(self, progress: bool = True) -> dict:
+        from torch.utils.tensorboard import SummaryWriter
+        from tqdm import tqdm
+
+        cfg = self.cfg
+        writer = SummaryWriter(str(self.out / "tb"))
+        n = len(self.train_set["points"])
+        bar = tqdm(total=cfg.steps, initial=self.step, disable=not progress, desc=f"pretrain {cfg.model}")
+        t0 = time.perf_counter()
+        while self.step < cfg.steps:
+            idx = torch.randint(n, (cfg.batch_size,), generator=self.generator)
+            pts, hand = prepare(self.train_set["points"][idx], self.train_set["hand_pose"][idx], cfg,
+                                self.generator)
+            _, _, loss = self._forward(pts, hand, self.train_set["labels"][idx])
+            if self.initial_loss is None:
+                self.initial_loss = loss.item()
+            for group in self.optimizer.param_groups:
+                group["lr"] = self.lr_at(self.step)
+            self.optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
+            self.optimizer.step()
+            self.step += 1
+            writer.add_scalar("train/loss", loss.item(), self.step)
+            writer.add_scalar("train/lr", self.lr_at(self.step - 1), self.step)
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss.item():.3f}")
+            if self.step % cfg.eval_every == 0 or self.step == cfg.steps:
+                row = {"step": self.step, "loss": loss.item(),
+                       **{f"val_{k}": v for k, v in self.evaluate("val").items()}}
+                self.history.append(row)
+                for k, v in row.items():
+                    if k.startswith("val_"):
+                        writer.add_scalar(f"val/{k[4:]}", v, self.step)
+            if self.step % cfg.checkpoint_every == 0:
+                self._save()
+        bar.close()
+        self._save()
+        writer.close()
+        metrics = {"model": cfg.model, "steps": self.step, "batch_size": cfg.batch_size,
+                   "samples_seen": self.step * cfg.batch_size, "train_samples": n,
+                   "seconds_this_run": time.perf_counter() - t0,
+                   "parameters": sum(p.numel() for p in self.model.parameters())}
+        for split, prefix in (("val", "heldout"), ("unseen", "unseen")):
+            for k, v in self.evaluate(split).items():
+                metrics[f"{prefix}_patch_{k}"] = v
+        write_json(self.out / "metrics.json", metrics)
+        encoder = self.model.encoder
+        save_encoder(self.out / "encoder.pt", cfg.model, encoder)
+        plot_predictions(self, self.out / "plots" / "predictions.png")
+        return metrics
+
+
+def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
+    """A few unseen (or held-out) clouds coloured by predicted vs true patch contact."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from corn_drake.contact.generate import _quat_to_matrix
+    from corn_drake.scene.gripper import gripper_boxes
+
+    try:
+        data = load_split(trainer.data, "unseen")
+    except ValueError:
+        data = load_split(trainer.data, "val")
+    labels = data["labels"]
+    picks = np.flatnonzero(labels.any(1))[:count]
+    fig = plt.figure(figsize=(4 * len(picks), 8))
+    trainer.model.eval()
+    with torch.no_grad():
+        for col, i in enumerate(picks):
+            pts_w = torch.from_numpy(data["points"][i:i + 1])
+            pts, hand = prepare(pts_w, torch.from_numpy(data["hand_pose"][i:i + 1]), trainer.cfg)
+            logits, targets, _ = trainer._forward(pts, hand, torch.from_numpy(labels[i:i + 1]))
+            _, knn = patch_indices(pts)
+            point_patch = torch.zeros(512, dtype=torch.long)
+            point_patch[knn[0].flatten()] = torch.arange(16).repeat_interleave(32)
+            for row, (values, title) in enumerate(((logits[0] > 0, "predicted"), (targets[0], "true"))):
+                ax = fig.add_subplot(2, len(picks), row * len(picks) + col + 1, projection="3d")
+                colors = np.where(values[point_patch].numpy(), "tab:red", "tab:blue")
+                p = data["points"][i]
+                ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=colors, s=3)
+                R = _quat_to_matrix(data["hand_pose"][i:i + 1, 3:])[0]
+                for box in gripper_boxes():
+                    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+                    c = (box.X_TB[:3, :3] @ (corners * box.half_extents).T).T + box.X_TB[:3, 3]
+                    c = c @ R.T + data["hand_pose"][i, :3]
+                    for a in range(8):
+                        for b in range(a + 1, 8):
+                            if bin(a ^ b).count("1") == 1:
+                                ax.plot(*zip(c[a], c[b]), color="k", lw=0.6)
+                ax.set_title(f"sample {i}: {title} contact patches")
+    trainer.model.train()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=80)
+    plt.close(fig)

@@ -1,0 +1,25 @@
+"""Torch pose helpers for the networks: quaternions -> 6D rotations, yaw rotations."""
+
+from __future__ import annotations
+
+import torch
+
+
+def quat_wxyz_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    q = q / q.norm(dim=-1, keepdim=True)
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1).reshape(*q.shape[:-1], 3, 3)
+
+
+def rot6d(R: torch.Tensor) -> torch.Tensor:
+    """First two columns of R, column after column (..., 6) — the numpy transforms.rot6d order."""
+    return torch.cat([R[..., :, 0], R[..., :, 1]], dim=-1)
+
+
+def yaw_matrix(yaw: torch.Tensor) -> torch.Tensor:
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    zero, one = torch.zeros_like(yaw), torch.ones_like(yaw)
+    return torch.stack([c, -s, zero, s, c, zero, zero, zero, one], -1).reshape(*yaw.shape, 3, 3)
