@@ -9,7 +9,9 @@ from nbclient import NotebookClient
 
 from corn_drake import REPO_ROOT
 
-NOTEBOOKS = ["01_scene_and_controller.ipynb", "04_teacher_rollout.ipynb"]
+RECORDING_NOTEBOOKS = {"01_scene_and_controller.ipynb", "04_teacher_rollout.ipynb"}
+NOTEBOOKS = ["01_scene_and_controller.ipynb", "02_objects.ipynb", "03_contact_pretraining.ipynb",
+             "04_teacher_rollout.ipynb"]
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
@@ -18,5 +20,7 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     nb = nbformat.read(REPO_ROOT / "notebooks" / name, as_version=4)
     NotebookClient(nb, timeout=600, kernel_name="python3",
                    resources={"metadata": {"path": str(REPO_ROOT)}}).execute()
-    outputs = list(Path(tmp_path).glob("*.html"))
-    assert outputs and all(p.stat().st_size > 10_000 for p in outputs)
+    # Notebooks that record an episode leave a standalone Meshcat HTML file.
+    if name in RECORDING_NOTEBOOKS:
+        outputs = list(Path(tmp_path).glob("*.html"))
+        assert outputs and all(p.stat().st_size > 10_000 for p in outputs)

@@ -81,13 +81,13 @@ def mug(rng: Rng):
     return cup + ring.translate([r - 0.002, 0, 0])
 
 
-def bowl(rng: Rng):  # also drippers (steep walls)
-    r = rng.uniform(0.05, 0.08)
-    depth = rng.uniform(0.5, 0.9)
-    outer = mf.Manifold.sphere(r, SEGMENTS).scale([1, 1, depth])
-    inner = mf.Manifold.sphere(r * 0.88, SEGMENTS).scale([1, 1, depth]).translate([0, 0, 0.004])
-    cut = _box(3 * r, 3 * r, 2 * r).translate([0, 0, r])
-    return outer - inner - cut
+def bowl(rng: Rng):  # bowls and drippers: a flat-bottomed conical shell
+    r_top, h = rng.uniform(0.05, 0.08), rng.uniform(0.03, 0.06)
+    r_bottom = r_top * rng.uniform(0.4, 0.7)
+    wall = rng.uniform(0.005, 0.01)
+    outer = _cyl(r_bottom, h, r_top)
+    inner = _cyl(r_bottom - wall, h, r_top - wall).translate([0, 0, wall])
+    return outer - inner
 
 
 def block(rng: Rng):  # L, T and U shapes

@@ -1,9 +1,11 @@
-"""`corn-drake demo`: the main job end to end at a small default size.
+"""`corn-drake demo`: the whole pipeline end to end at a small default size (minutes on a CPU).
 
-Stages that exist so far: build the teacher diagram from diagrams/teacher_rollout.yaml, run a
-scripted push episode with fixed gains recorded to Meshcat HTML, and measure env vs bare-physics
-speed. Later stages (object library, contact data, pretraining, teacher training, evaluation)
-join here as they land.
+1. object library: one procedural object per family (train + unseen families);
+2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
+4. PPO teacher (`corn` policy, frozen encoder) on the reduced benchmark over the train objects;
+5. evaluation in the evaluation diagram on an unseen object, recorded to Meshcat HTML;
+plus a scripted push recording and the simulation-speed report. Every stage writes under --out
+and is skipped when its output is already complete, so a killed demo resumes.
 """
 
 from __future__ import annotations
@@ -17,50 +19,107 @@ HELP = "run the pipeline end to end at a small default size; prints where each o
 
 def add_arguments(parser):
     parser.add_argument("--out", default="runs/demo", help="output folder")
-    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--objects", type=int, default=14, help="procedural objects")
+    parser.add_argument("--contact-samples", type=int, default=20_000)
+    parser.add_argument("--pretrain-steps", type=int, default=300)
+    parser.add_argument("--train-steps", type=int, default=4096, help="teacher env steps")
+    parser.add_argument("--eval-episodes", type=int, default=2)
     parser.add_argument("--bench-steps", type=int, default=200)
 
 
+def _stage(name: str, outputs: dict, t0: float):
+    print(f"[demo] {name} ({time.perf_counter() - t0:.0f} s so far)", flush=True)
+
+
 def run(args) -> int:
+    from pydrake.common.yaml import yaml_dump_typed
     from pydrake.geometry import Meshcat
 
+    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.assets.library import build_procedural
+    from corn_drake.assets.process import ProcessConfig
     from corn_drake.bench.report import write_report
     from corn_drake.bench.sim import run as bench_sim
+    from corn_drake.cli import main as cli
+    from corn_drake.config import PretrainConfig
+    from corn_drake.contact.pretrain import Pretrainer
+    from corn_drake.contact.runner import generate_dataset
     from corn_drake.diagrams import load_teacher_config
+    from corn_drake.io_utils import write_text
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.rollout import run_episode
     from corn_drake.rl.scripted import ScriptedPush
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    outputs = {}
-    t0 = time.perf_counter()
+    outputs, t0 = {}, time.perf_counter()
 
-    cfg = load_teacher_config()
-    env = TeacherEnv(cfg, meshcat=Meshcat())
+    _stage("1/6 object library", outputs, t0)
+    cfg = ProcessConfig()
+    cfg.drops.drops = 32
+    library = out / "library"
+    build_procedural(library, args.objects, args.seed, cfg, progress=False)
+    outputs["object library"] = library / "manifest.json"
+
+    _stage("2/6 contact data", outputs, t0)
+    data = out / "contact_data"
+    generate_dataset(library, data, args.contact_samples, args.seed, progress=False)
+    outputs["contact dataset"] = data / "manifest.json"
+
+    _stage("3/6 contact pretraining", outputs, t0)
+    pre = out / "pretrain" / "corn"
+    pcfg = PretrainConfig(model="corn", steps=args.pretrain_steps, batch_size=256,
+                          warmup_steps=max(args.pretrain_steps // 10, 1),
+                          eval_every=max(args.pretrain_steps // 2, 1),
+                          checkpoint_every=max(args.pretrain_steps // 2, 1), eval_samples=1024)
+    metrics = Pretrainer(pcfg, data, pre).train(progress=False)
+    print(f"[demo] unseen patch accuracy {metrics.get('unseen_patch_accuracy', float('nan')):.3f} "
+          f"after {args.pretrain_steps} steps")
+    outputs["pretraining metrics"] = pre / "metrics.json"
+    outputs["frozen encoder"] = pre / "encoder.pt"
+
+    _stage("4/6 teacher PPO (corn)", outputs, t0)
+    run_dir = out / "teacher_corn"
+    config = out / "teacher_config.yaml"
+    teacher_cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark.yaml")
+    obj = teacher_cfg.scene.object
+    obj.kind, obj.library, obj.object_id = "library", str(library.resolve()), ""
+    write_text(config, yaml_dump_typed(teacher_cfg))
+    cli(["train", "--policy", "corn", "--config", str(config), "--encoder", str(pre / "encoder.pt"),
+         "--steps", str(args.train_steps), "--envs-per-worker", "8", "--rollout-steps", "32",
+         "--seed", str(args.seed), "--out", str(run_dir), "--no-progress"])
+    outputs["teacher run (TensorBoard in tb/)"] = run_dir
+    outputs["learning curve"] = run_dir / "plots" / "learning_curve.png"
+
+    _stage("5/6 evaluation on unseen objects", outputs, t0)
+    report = out / "eval_corn.json"
+    cli(["evaluate", "--run", str(run_dir), "--objects", str(library), "--split", "unseen",
+         "--episodes", str(args.eval_episodes), "--record", "1", "--config", str(config),
+         "--report", str(report)])
+    outputs["evaluation report"] = report
+    outputs["evaluation recording (Meshcat HTML)"] = out / "eval_corn_recordings"
+
+    _stage("6/6 scripted push + simulation speed", outputs, t0)
+    env = TeacherEnv(load_teacher_config(), meshcat=Meshcat())
     pushes = {}
 
     def on_reset(_obs):
         start = env.episode_info["initial_object_pose"][:3]
-        pushes["policy"] = ScriptedPush.toward_table_centre(cfg.controller, start[:2])
+        pushes["policy"] = ScriptedPush.toward_table_centre(env.cfg.controller, start[:2])
 
-    result = run_episode(env, lambda obs: pushes["policy"](obs["hand_state"]), seed=args.seed,
+    result = run_episode(env, lambda obs: pushes["policy"](obs["hand_state"]), seed=3,
                          max_steps=60, record_path=out / "scripted_push.html", on_reset=on_reset)
-    if result.sim_error:
-        raise RuntimeError(f"scripted push failed in simulation: {result.sim_error}")
     outputs["scripted push recording (Meshcat HTML)"] = result.recording
-    print(f"[demo] scripted push: {result.steps} steps, return {result.total_reward:.3f}, "
-          f"final xy error {result.final_status['position_error']:.3f} m")
-
     bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0,
-                                       "policy": None})()
+                                   "policy": None})()
     report_path = out / "bench_sim.json"
-    report = write_report(str(report_path), "sim", bench_sim(bench_args))["results"]
+    sim = write_report(str(report_path), "sim", bench_sim(bench_args))["results"]
     outputs["simulation speed report"] = report_path
-    print(f"[demo] env {report['policy_steps_per_s']:.0f} policy steps/s, bare physics "
-          f"{report['bare_physics_policy_steps_per_s']:.0f}, overhead {report['overhead_ratio']:.2f}x")
+    print(f"[demo] env {sim['policy_steps_per_s']:.0f} policy steps/s, bare physics "
+          f"{sim['bare_physics_policy_steps_per_s']:.0f}, overhead {sim['overhead_ratio']:.2f}x")
 
-    print(f"[demo] done in {time.perf_counter() - t0:.1f} s. Outputs:")
+    print(f"[demo] done in {time.perf_counter() - t0:.0f} s. Outputs:")
     for what, path in outputs.items():
         print(f"  {what}: {path}")
     return 0

@@ -34,9 +34,10 @@ def run(args) -> int:
     env_cfg = load_teacher_config(args.config)
     if args.episode_steps:
         env_cfg.task.episode_steps = args.episode_steps
-    if args.objects:
+    if args.objects:  # every train object of the library, one per env (cycling)
         env_cfg.scene.object.kind = "library"
         env_cfg.scene.object.library = args.objects
+        env_cfg.scene.object.object_id = ""
     cfg = TrainConfig(policy=args.policy, total_steps=args.steps, workers=args.workers,
                       envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
                       seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,

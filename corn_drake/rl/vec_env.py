@@ -7,6 +7,7 @@ bootstraps time-outs from its value).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from typing import Any
 
@@ -17,7 +18,11 @@ from corn_drake.config import TeacherDiagramConfig
 
 @dataclasses.dataclass
 class EnvFactory:
-    """Picklable recipe for the envs of one batch: the config, and seeds derived from `seed`."""
+    """Picklable recipe for the envs of one batch: the config, and seeds derived from `seed`.
+
+    With a library object config and no object_id, env i gets the library's i-th train object
+    (cycling), so a batch trains on many objects at once.
+    """
 
     config: TeacherDiagramConfig
     seed: int = 0
@@ -25,7 +30,16 @@ class EnvFactory:
     def make(self, index: int):
         from corn_drake.rl.env import TeacherEnv
 
-        cfg = dataclasses.replace(self.config, seed=self.seed + index)
+        cfg = copy.deepcopy(self.config)
+        cfg.seed = self.seed + index
+        obj = cfg.scene.object
+        if obj.kind == "library" and not obj.object_id:
+            from corn_drake.assets.library import list_objects
+
+            ids = list_objects(obj.library, "train")
+            if not ids:
+                raise ValueError(f"object library {obj.library} has no train objects")
+            obj.object_id = ids[index % len(ids)]
         return TeacherEnv(cfg)
 
 
