@@ -87,3 +87,16 @@ def test_nothing_in_view_gives_an_empty_cloud_and_zero_points():
     n = h.per.segmentation.GetOutputPort("num_points").Eval(h.seg_context)
     pts = h.per.segmentation.GetOutputPort("points").Eval(h.seg_context)
     assert n[0] == 0 and not pts.any()
+
+
+def test_d435_resolution_works_after_voxel_thinning():
+    """640 x 480 per camera (a real D435): thinned to 4 mm voxels, still only object points."""
+    from corn_drake.perception_harness import PerceptionHarness
+
+    cfg = StudentDiagramConfig()
+    cfg.cameras.width, cfg.cameras.height = 640, 480
+    h = PerceptionHarness(cfg)
+    h.set_object(SCENES[0])
+    pr = h.precision_recall()
+    assert h.per.segmentation.voxel > 0
+    assert pr["non_object_fraction"] < 0.02 and pr["kept"] > 500, pr

@@ -6,7 +6,8 @@ Geometric mode (the paper's real-world chain), in order:
   3. drop points within `table_margin` of the table top;
   4. drop points inside the robot's link primitives (boxes / cylinders, grown by
      `robot_margin`), posed by forward kinematics of the robot state input;
-  5. radius outlier removal (n neighbours within r);
+  5. for dense images (D435-like), voxel thinning to `max_px_per_m`; then radius outlier
+     removal (n neighbours within r, n scaled to the rig's pixel density);
   6. DBSCAN; the largest cluster is the object.
 Ground-truth mode keeps the pixels whose render label is the object's body (training only).
 
@@ -120,8 +121,16 @@ class SegmentationStats:
     cluster: int = 0
 
 
+def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
+    """Indices of one point per occupied voxel (the first in order), so indices stay original."""
+    keys = np.floor(points / voxel).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return np.sort(first)
+
+
 def segment_geometric(points: np.ndarray, link_poses, prims, cfg, table_box, outlier_n: int,
-                      eps: float, stats: SegmentationStats | None = None) -> np.ndarray:
+                      eps: float, stats: SegmentationStats | None = None,
+                      voxel: float = 0.0) -> np.ndarray:
     """Indices into `points` (N, 3; may hold non-finite rows) of the object's points.
 
     table_box: (x_half, y_half, top_z) of the table centred at the world origin.
@@ -146,6 +155,11 @@ def segment_geometric(points: np.ndarray, link_poses, prims, cfg, table_box, out
     stats.not_robot = len(idx)
     if len(p) == 0:
         return idx
+    if voxel > 0:
+        # Dense images (a D435's 640 x 480): thin to the density n and eps were scaled for;
+        # radius search and DBSCAN cost grows with the square of the density.
+        keep = voxel_subsample(p, voxel)
+        idx, p = idx[keep], p[keep]
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     if outlier_n > 1:
         _, inl = pcd.remove_radius_outlier(nb_points=outlier_n, radius=cfg.outlier_radius)
@@ -202,8 +216,10 @@ class ObjectSegmentation(LeafSystem):
         self._table_box = (table_size[0] / 2, table_size[1] / 2, TABLE_TOP_Z)
         self._label = object_label
         self._poser = RobotLinkPoser(prims, robot_base) if prims else None
-        self.outlier_n = auto_outlier_points(cfg, px_per_m)
-        self.eps = auto_dbscan_eps(cfg, px_per_m)
+        density = min(px_per_m, cfg.max_px_per_m)
+        self.voxel = 1.0 / cfg.max_px_per_m if px_per_m > cfg.max_px_per_m else 0.0
+        self.outlier_n = auto_outlier_points(cfg, density)
+        self.eps = auto_dbscan_eps(cfg, density)
         for i in range(num_cameras):
             self.DeclareAbstractInputPort(f"cloud{i}", AbstractValue.Make(PointCloud()))
         if cfg.mode == "ground_truth":
@@ -235,7 +251,7 @@ class ObjectSegmentation(LeafSystem):
         else:
             prims, poses = [], []
         return segment_geometric(pts, poses, prims, self.cfg, self._table_box, self.outlier_n,
-                                 self.eps, stats)
+                                 self.eps, stats, self.voxel)
 
     def segment(self, context) -> np.ndarray:
         """The object's points (K, 3) in the world frame."""
