@@ -21,7 +21,7 @@ class PolicyClock:
     time_step: float
 
     def __post_init__(self):
-        ratio = self.period / self.time_step
+        ratio = self.period / self.time_step if self.time_step > 0 else 0.0
         if self.time_step <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
             raise ValueError(f"policy_period {self.period} must be a whole multiple of the physics "
                              f"time_step {self.time_step}")
@@ -29,6 +29,12 @@ class PolicyClock:
     @property
     def offset(self) -> float:
         return self.time_step / 2
+
+    @property
+    def perception_offset(self) -> float:
+        """Offset of per-step perception updates: a quarter step after each policy boundary's
+        last plant update (at n * period) and a quarter step before the policy latch reads it."""
+        return self.time_step / 4
 
     @property
     def substeps(self) -> int:

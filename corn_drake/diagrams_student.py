@@ -1,0 +1,154 @@
+"""The student rollout diagram: the teacher's scene and systems plus the perception chain.
+
+    plant/scene graph --> 3 RgbdSensors --> DepthImageToPointCloud (x3, world frame)
+        --> ObjectSegmentation (robot state for the link test) --> PoseTracker (ICP)
+        --> StudentObservations (+ RandomSource cloud noise)
+
+Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`;
+outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (7, estimated),
+`perception.status` (PoseTracker STATUS_FIELDS), `perception.num_points`,
+`perception.object_cloud` (PointCloud of the segmented points).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+from pydrake.common import RandomDistribution
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import MatrixGain, RandomSource
+
+from corn_drake import DIAGRAMS_DIR
+from corn_drake.config import load_config
+from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.diagrams import TeacherDiagram, add_teacher_systems
+from corn_drake.scene.builder import Scene
+from corn_drake.timing import clock_of
+from corn_drake.scene.objects import ObjectSpec
+from corn_drake.systems.cameras import CameraRig, add_camera_rig, remove_perception_role
+from corn_drake.systems.pose_tracker import PoseTracker
+from corn_drake.systems.segmentation import ObjectSegmentation, robot_link_primitives
+from corn_drake.systems.student_observations import STUDENT_OBS_KEYS, StudentObservations
+
+
+@dataclasses.dataclass
+class PerceptionHandles:
+    rig: CameraRig
+    segmentation: ObjectSegmentation
+    tracker: PoseTracker
+    px_per_m: float
+
+
+@dataclasses.dataclass
+class StudentDiagram:
+    diagram: Diagram
+    teacher: TeacherDiagram
+    perception: PerceptionHandles
+    observations: StudentObservations
+    config: StudentDiagramConfig
+
+    @property
+    def scene(self) -> Scene:
+        return self.teacher.scene
+
+
+def load_student_config(path: str | Path | None = None) -> StudentDiagramConfig:
+    return load_config(path or DIAGRAMS_DIR / "student_rollout.yaml", StudentDiagramConfig)
+
+
+def pixels_per_metre(cam_cfg, fov_y: float) -> float:
+    """Image rows per metre of surface facing the camera at the mean eye distance."""
+    d = np.mean([np.linalg.norm(np.asarray(e) - np.asarray(cam_cfg.look_at)) for e in cam_cfg.eyes])
+    return float(cam_cfg.height / (2.0 * d * np.tan(fov_y / 2.0)))
+
+
+def _pose7_selector() -> np.ndarray:
+    """7 x 13 matrix: free-body state [q_wxyz, p, w, v] -> pose [p, q_wxyz]."""
+    S = np.zeros((7, 13))
+    S[0:3, 4:7] = np.eye(3)
+    S[3:7, 0:4] = np.eye(4)
+    return S
+
+
+def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDiagramConfig,
+                           goal_pose_port=None) -> PerceptionHandles:
+    """Cameras -> segmentation -> tracker on `scene` (whose plant is already finalized)."""
+    plant, sg = scene.plant, scene.scene_graph
+    object_state = plant.get_state_output_port(scene.object_instance)
+    robot_state = plant.get_state_output_port(scene.panda)
+    if cfg.cameras.hide_robot:
+        visuals = [g for b in plant.GetBodyIndices(scene.panda)
+                   for g in plant.GetVisualGeometriesForBody(plant.get_body(b))]
+        remove_perception_role(plant, sg, visuals)
+    rig = add_camera_rig(builder, sg, cfg.cameras, scene.object_spec.radius, object_state)
+    px_per_m = pixels_per_metre(cfg.cameras, rig.fov_y)
+
+    seg_cfg = cfg.segmentation
+    geometric = seg_cfg.mode == "geometric"
+    seg = builder.AddNamedSystem("segmentation", ObjectSegmentation(
+        seg_cfg, len(rig.sensors), table_size=scene.config.table_size,
+        robot_base=scene.config.robot_base,
+        prims=robot_link_primitives(plant, sg, scene.panda) if geometric else None,
+        object_label=int(scene.object_body.index()), px_per_m=px_per_m))
+    for i, port in enumerate(rig.cloud_ports()):
+        builder.Connect(port, seg.GetInputPort(f"cloud{i}"))
+    if geometric:
+        builder.Connect(robot_state, seg.GetInputPort("robot_state"))
+    else:
+        for i, port in enumerate(rig.label_ports()):
+            builder.Connect(port, seg.GetInputPort(f"label{i}"))
+
+    physics = cfg.teacher.scene.physics
+    tcfg = cfg.tracker
+    offset = tcfg.offset if tcfg.offset >= 0 else clock_of(physics).perception_offset
+    tracker = builder.AddNamedSystem("pose_tracker", PoseTracker(
+        tcfg, period=tcfg.period, offset=offset, thin=scene.object_spec.thin))
+    builder.Connect(seg.GetOutputPort("object_cloud"), tracker.GetInputPort("object_cloud"))
+    # The tracker starts from the true initial pose (on the robot: the pose the episode is
+    # set up at); afterwards it only sees clouds.
+    to_pose7 = builder.AddNamedSystem("object_pose7", MatrixGain(_pose7_selector()))
+    builder.Connect(object_state, to_pose7.get_input_port())
+    builder.Connect(to_pose7.get_output_port(), tracker.GetInputPort("initial_pose"))
+    if goal_pose_port is not None:
+        builder.Connect(goal_pose_port, tracker.GetInputPort("goal_pose"))
+    return PerceptionHandles(rig=rig, segmentation=seg, tracker=tracker, px_per_m=px_per_m)
+
+
+def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectSpec | None = None,
+                          meshcat=None) -> StudentDiagram:
+    cfg = cfg or load_student_config()
+    builder = DiagramBuilder()
+    teacher = add_teacher_systems(builder, cfg.teacher, spec)
+    builder.ExportInput(teacher.ik.GetInputPort("action"), "controller.action")
+    perception = add_perception_systems(builder, teacher.scene, cfg,
+                                        teacher.sources["goal_pose"].get_output_port())
+    n = cfg.segmentation.num_points
+    obs = builder.AddNamedSystem("student_observations", StudentObservations(
+        n, cfg.observation.cloud_noise_std))
+    noise = builder.AddNamedSystem("cloud_noise", RandomSource(
+        RandomDistribution.kGaussian, 3 * n, cfg.teacher.scene.physics.policy_period))
+    builder.Connect(noise.get_output_port(), obs.GetInputPort("unit_noise"))
+    builder.Connect(perception.segmentation.GetOutputPort("points"), obs.GetInputPort("points"))
+    builder.Connect(teacher.observations.GetOutputPort("hand_state"), obs.GetInputPort("hand_state"))
+    builder.Connect(teacher.scene.plant.get_state_output_port(teacher.scene.panda),
+                    obs.GetInputPort("robot_state"))
+    builder.Connect(teacher.ik.GetOutputPort("previous_action"), obs.GetInputPort("previous_action"))
+    builder.Connect(perception.tracker.GetOutputPort("goal"), obs.GetInputPort("estimated_goal"))
+    for key in STUDENT_OBS_KEYS:
+        builder.ExportOutput(obs.GetOutputPort(key), f"student.{key}")
+    builder.ExportOutput(perception.tracker.GetOutputPort("pose"), "perception.pose")
+    builder.ExportOutput(perception.tracker.GetOutputPort("status"), "perception.status")
+    builder.ExportOutput(perception.segmentation.GetOutputPort("num_points"), "perception.num_points")
+    builder.ExportOutput(perception.segmentation.GetOutputPort("object_cloud"),
+                         "perception.object_cloud")
+    if meshcat is not None:
+        from corn_drake.viz.meshcat import add_meshcat_visualizer
+
+        add_meshcat_visualizer(builder, teacher.scene.scene_graph, meshcat)
+    diagram = builder.Build()
+    diagram.set_name("student_rollout")
+    teacher.diagram = diagram
+    return StudentDiagram(diagram=diagram, teacher=teacher, perception=perception,
+                          observations=obs, config=cfg)
