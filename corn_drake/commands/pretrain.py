@@ -1,7 +1,9 @@
 """`corn-drake pretrain`: contact pretraining of the CORN encoder and/or the PointNet baseline.
 
-With --model both, CORN and PointNet are trained on the same data for the same steps and batch,
-in OUT/corn and OUT/pointnet; OUT/metrics.json holds CORN's metrics with PointNet's under
+With --model both, CORN and PointNet are trained on the same data and batch, in OUT/corn and
+OUT/pointnet, for the same number of steps (--pointnet-budget steps) or the same optimisation
+wall-clock (--pointnet-budget time: CORN's recorded train_seconds divided by PointNet's measured
+seconds per step; PointNet is ~20x slower per step on a CPU, so equal steps do not fit a session); OUT/metrics.json holds CORN's metrics with PointNet's under
 "pointnet", and OUT/encoder.pt is the frozen CORN encoder for `corn-drake train --policy corn`.
 """
 
@@ -21,7 +23,10 @@ def add_arguments(parser):
     parser.add_argument("--model", choices=("corn", "pointnet", "both"), default="both")
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--pointnet-steps", type=int, default=None,
-                        help="PointNet steps (default: the same as --steps)")
+                        help="PointNet steps (overrides --pointnet-budget)")
+    parser.add_argument("--pointnet-budget", choices=("steps", "time"), default="steps",
+                        help="with --model both: PointNet gets CORN's steps or CORN's wall-clock")
+    parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: config)")
     parser.add_argument("--batch-size", type=int, default=1024)
     parser.add_argument("--eval-every", type=int, default=250)
     parser.add_argument("--seed", type=int, default=0)
@@ -37,9 +42,28 @@ def run(args) -> int:
     out = Path(args.out)
     models = ["corn", "pointnet"] if args.model == "both" else [args.model]
     results = {}
+    budget = {"kind": "steps"}
     for model in models:
-        steps = args.pointnet_steps if model == "pointnet" and args.pointnet_steps else args.steps
-        cfg = PretrainConfig(model=model, steps=steps, batch_size=args.batch_size,
+        steps = args.steps
+        if model == "pointnet" and args.pointnet_steps:
+            steps = args.pointnet_steps
+            budget = {"kind": "steps_given"}
+        elif model == "pointnet" and args.pointnet_budget == "time" and "corn" in results:
+            from corn_drake.contact.pretrain import seconds_per_step
+
+            previous = out / model / "config.yaml"
+            per_step = seconds_per_step("pointnet", args.batch_size)
+            steps = max(1, round(results["corn"]["train_seconds"] / per_step))
+            if previous.exists():  # resuming: keep the step count the run started with
+                from corn_drake.config import load_config
+
+                steps = load_config(previous, PretrainConfig).steps
+            budget = {"kind": "equal_wall_clock", "corn_train_seconds": results["corn"]["train_seconds"],
+                      "pointnet_seconds_per_step": per_step}
+            print(f"pointnet: {steps} steps = CORN's {results['corn']['train_seconds']:.0f} s "
+                  f"at {per_step:.2f} s/step")
+        extra = {} if args.lr is None else {"lr": args.lr}
+        cfg = PretrainConfig(model=model, steps=steps, batch_size=args.batch_size, **extra,
                              warmup_steps=min(100, max(steps // 10, 1)), eval_every=args.eval_every,
                              checkpoint_every=args.eval_every, seed=args.seed)
         run_dir = out / model
@@ -54,7 +78,7 @@ def run(args) -> int:
         merged.update(results["corn"])
         shutil.copyfile(out / "corn" / "encoder.pt", out / "encoder.pt")
     if "pointnet" in results:
-        merged["pointnet"] = results["pointnet"]
+        merged["pointnet"] = {**results["pointnet"], "budget": budget}
     write_json(merged_path, merged)
     print(f"wrote {merged_path}")
     return 0

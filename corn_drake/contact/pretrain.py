@@ -75,6 +75,7 @@ class Pretrainer:
                                            weight_decay=cfg.weight_decay)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.step, self.history, self.initial_loss = 0, [], None
+        self.train_seconds = 0.0  # optimisation wall-clock over all runs (resumes add to it)
         self.train_set = {k: torch.from_numpy(v) for k, v in load_split(self.data, "train").items()
                           if k in ("points", "labels", "hand_pose")}
         self.checkpoint = self.out / "checkpoints" / "last.pt"
@@ -84,6 +85,7 @@ class Pretrainer:
             self.optimizer.load_state_dict(state["optimizer"])
             self.generator.set_state(state["generator"])
             self.step, self.history = state["step"], state["history"]
+            self.train_seconds = state.get("train_seconds", 0.0)
 
     def lr_at(self, step: int) -> float:
         c = self.cfg
@@ -107,7 +109,8 @@ class Pretrainer:
     def _save(self):
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
                  "generator": self.generator.get_state(), "step": self.step,
-                 "history": self.history, "model_kind": self.cfg.model}
+                 "history": self.history, "model_kind": self.cfg.model,
+                 "train_seconds": self.train_seconds}
         with atomic_path(self.checkpoint) as tmp:
             torch.save(state, tmp)
 
@@ -139,6 +142,7 @@ class Pretrainer:
         bar = tqdm(total=cfg.steps, initial=self.step, disable=not progress, desc=f"pretrain {cfg.model}")
         t0 = time.perf_counter()
         while self.step < cfg.steps:
+            t_step = time.perf_counter()
             idx = torch.randint(n, (cfg.batch_size,), generator=self.generator)
             pts, hand = prepare(self.train_set["points"][idx], self.train_set["hand_pose"][idx], cfg,
                                 self.generator)
@@ -152,6 +156,7 @@ class Pretrainer:
             nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
             self.optimizer.step()
             self.step += 1
+            self.train_seconds += time.perf_counter() - t_step
             writer.add_scalar("train/loss", loss.item(), self.step)
             writer.add_scalar("train/lr", self.lr_at(self.step - 1), self.step)
             bar.update(1)
@@ -171,6 +176,7 @@ class Pretrainer:
         metrics = {"model": cfg.model, "steps": self.step, "batch_size": cfg.batch_size,
                    "samples_seen": self.step * cfg.batch_size, "train_samples": n,
                    "seconds_this_run": time.perf_counter() - t0,
+                   "train_seconds": self.train_seconds, "lr": cfg.lr,
                    "parameters": sum(p.numel() for p in self.model.parameters())}
         for split, prefix in (("val", "heldout"), ("unseen", "unseen")):
             for k, v in self.evaluate(split).items():
@@ -180,6 +186,26 @@ class Pretrainer:
         save_encoder(self.out / "encoder.pt", cfg.model, encoder)
         plot_predictions(self, self.out / "plots" / "predictions.png")
         return metrics
+
+
+def seconds_per_step(model_kind: str, batch_size: int, repeats: int = 3) -> float:
+    """Wall-clock of one optimisation step of `model_kind` at `batch_size` (after a warm-up
+    step), on random clouds: what an equal-time budget converts into steps."""
+    torch.manual_seed(0)
+    model = CORNContactModel() if model_kind == "corn" else PointNetContactModel()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
+    points = torch.randn(batch_size, 512, 3) * 0.2
+    hand = torch.randn(batch_size, 9)
+    times = []
+    for _ in range(repeats + 1):
+        t = time.perf_counter()
+        out = model(points, hand)
+        logits = out[0] if isinstance(out, tuple) else out
+        optimizer.zero_grad()
+        logits.float().square().mean().backward()
+        optimizer.step()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times[1:]))
 
 
 def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
