@@ -121,3 +121,27 @@ def test_lr_goes_down_when_updates_overshoot_the_kl_target():
     obs, actions, logp, adv, ret = _batch(policy)
     ppo.update(obs, actions, logp, adv, ret, torch.Generator().manual_seed(1))
     assert ppo.lr < 5e-3  # overshooting KL lowers the lr instead of pinning it at the maximum
+
+
+def test_an_update_cut_short_does_not_leave_a_raised_lr(monkeypatch):
+    """KLs small at first (lr raised) then past the stop (1.5x target) but below the decrease
+    threshold (2x): the stop must give the raise back, or the lr ratchets up update after
+    update while every update is cut short."""
+    torch.manual_seed(0)
+    policy = _FlatPolicy()
+    cfg = PPOConfig(epochs=8, minibatches=4, lr=1e-3, kl_target=0.016)
+    ppo = PPO(policy, cfg)
+    real_losses = ppo.losses
+    kls = iter([0.0, 0.001, 0.030])  # 0.030: above the stop (0.024), below 2x target (0.032)
+
+    def scripted(*args):
+        out = real_losses(*args)
+        out["kl"] = torch.tensor(next(kls))
+        return out
+
+    monkeypatch.setattr(ppo, "losses", scripted)
+    obs, actions, logp, adv, ret = _batch(policy)
+    stats = ppo.update(obs, actions, logp, adv, ret, torch.Generator().manual_seed(1))
+    assert stats["early_stop"] == 1.0 and stats["minibatches"] == 2
+    assert ppo.lr <= cfg.lr + 1e-12
+    assert all(g["lr"] == ppo.lr for g in ppo.optimizer.param_groups)

@@ -106,11 +106,17 @@ class PPO:
                 # The first minibatch of an update sees the unchanged policy (KL = 0): it always
                 # steps and leaves the lr alone. Later ones adapt the lr, and stop the update
                 # when the policy has already moved too far.
+                # An update that has to stop also lowers the lr: with the stop (1.5x target)
+                # below the lr-decrease threshold (2x), small early-minibatch KLs otherwise
+                # ratchet the lr up to lr_max while every update is cut short (seen in a probe).
                 if stats["minibatches"] > 0:
-                    self._set_lr(kl)
                     if kl > c.kl_stop_factor * c.kl_target:
+                        self.lr = max(self.lr / 1.5, c.lr_min)
+                        for group in self.optimizer.param_groups:
+                            group["lr"] = self.lr
                         stats["early_stop"] = 1.0
                         break
+                    self._set_lr(kl)
                 self.optimizer.zero_grad()
                 last["total"].backward()
                 nn.utils.clip_grad_norm_(self.policy.parameters(), c.max_grad_norm)
