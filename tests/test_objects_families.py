@@ -25,3 +25,18 @@ def test_family_is_watertight_seeded_and_varied(family):
 def test_unknown_family_is_named():
     with pytest.raises(ValueError, match="teapot"):
         make_family_mesh("teapot", 0)
+
+
+@pytest.mark.parametrize("family, seed", [("mug", 0), ("bowl", 0), ("toy", 3), ("block", 1)])
+def test_concave_family_hulls_stay_within_15_percent_of_the_mesh_volume(family, seed, tmp_path):
+    from corn_drake.assets.decompose import DecompositionConfig, decompose
+    from corn_drake.assets.process import normalise
+
+    mesh = normalise(make_family_mesh(family, seed), 0.08)
+    hulls, ratio, runs = decompose(mesh, DecompositionConfig(), tmp_path)
+    assert len(hulls) <= 16 and runs in (1, 2)
+    assert 0.99 < ratio <= 1.15, f"{family} seed {seed}: hull union {ratio:.3f} x mesh volume"
+    # Cached: a second call makes no new CoACD result files and returns the same hulls.
+    files = sorted(p.name for p in tmp_path.iterdir())
+    again, ratio_again, _ = decompose(mesh, DecompositionConfig(), tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == files and ratio_again == ratio

@@ -37,7 +37,18 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
     assert metrics["global_step"] == 128 and len(resumed.history) == 4
     assert (tmp_path / "plots" / "learning_curve.png").stat().st_size > 1000
     assert any(p.name.startswith("events") for p in (tmp_path / "tb").iterdir())
-    assert json.loads((tmp_path / "metrics.json").read_text())["updates"] == 4
+    written = json.loads((tmp_path / "metrics.json").read_text())
+    assert written["updates"] == 4 and [h["step"] for h in written["history"]] == [32, 64, 96, 128]
+    # `corn-drake curves` overlays runs from their checkpoints; a folder that is no run is named.
+    from argparse import Namespace
+
+    from corn_drake.commands import curves
+
+    png = tmp_path / "both.png"
+    assert curves.run(Namespace(runs=[str(tmp_path), str(tmp_path)], out=str(png))) == 0
+    assert png.stat().st_size > 1000
+    with pytest.raises(FileNotFoundError, match="no checkpoints"):
+        curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png)))
 
 
 def test_killed_training_process_resumes_from_its_checkpoint(tmp_path):

@@ -25,6 +25,12 @@ class DecompositionConfig:
     resolution: int = 1000
     preprocess_mode: str = "off"
     seed: int = 0
+    # A union of hulls more than this above the mesh volume gets one more CoACD run with a finer
+    # concavity threshold and a deeper search; the tighter of the two decompositions is kept.
+    max_union_ratio: float = 1.15
+    retry_threshold: float = 0.02
+    retry_mcts_iterations: int = 150
+    retry_mcts_max_depth: int = 3
 
 
 def mesh_key(mesh: trimesh.Trimesh, cfg: DecompositionConfig) -> str:
@@ -33,6 +39,36 @@ def mesh_key(mesh: trimesh.Trimesh, cfg: DecompositionConfig) -> str:
     h.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
     h.update(json.dumps(dataclasses.asdict(cfg), sort_keys=True).encode())
     return h.hexdigest()[:32]
+
+
+def union_volume(hulls: list[trimesh.Trimesh]) -> float:
+    """Volume of the union of the hulls (they overlap, so the sum of their volumes over-counts)."""
+    import manifold3d as mf
+
+    total = None
+    for h in hulls:
+        m = mf.Manifold(mf.Mesh(vert_properties=np.asarray(h.vertices, np.float32),
+                                tri_verts=np.asarray(h.faces, np.uint32)))
+        total = m if total is None else total + m
+    return float(total.volume())
+
+
+def decompose(mesh: trimesh.Trimesh, cfg: DecompositionConfig,
+              cache_dir: Path | None) -> tuple[list[trimesh.Trimesh], float, int]:
+    """(hulls, union volume / mesh volume, CoACD runs made) for a watertight concave mesh."""
+    volume = float(mesh.volume)
+    hulls = convex_decomposition(mesh, cfg, cache_dir)
+    ratio = union_volume(hulls) / volume
+    if ratio <= cfg.max_union_ratio:
+        return hulls, ratio, 1
+    finer = dataclasses.replace(cfg, threshold=cfg.retry_threshold,
+                                mcts_iterations=cfg.retry_mcts_iterations,
+                                mcts_max_depth=cfg.retry_mcts_max_depth)
+    retry = convex_decomposition(mesh, finer, cache_dir)
+    retry_ratio = union_volume(retry) / volume
+    if abs(retry_ratio - 1.0) < abs(ratio - 1.0):
+        return retry, retry_ratio, 2
+    return hulls, ratio, 2
 
 
 def convex_decomposition(mesh: trimesh.Trimesh, cfg: DecompositionConfig,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from corn_drake.assets.decompose import DecompositionConfig, convex_decomposition
+from corn_drake.assets.decompose import DecompositionConfig, decompose, union_volume
 from corn_drake.assets.stable_poses import DropConfig, find_stable_poses
 from corn_drake.io_utils import atomic_path, save_npy
 from corn_drake.scene.objects import ObjectSpec
@@ -46,9 +46,12 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
     t = time.perf_counter()
     mesh = normalise(mesh, rng.uniform(*cfg.radius))
     radius = float(np.linalg.norm(mesh.vertices, axis=1).max())
-    hulls = [mesh.convex_hull] if convex else convex_decomposition(mesh, cfg.decomposition, cache_dir)
+    if convex:
+        hulls, coacd_runs = [mesh.convex_hull], 0
+        hull_ratio = union_volume(hulls) / float(mesh.volume)
+    else:
+        hulls, hull_ratio, coacd_runs = decompose(mesh, cfg.decomposition, cache_dir)
     timings["decompose_s"] = time.perf_counter() - t
-    union_volume = _union_volume(hulls)
     t = time.perf_counter()
     points, faces = trimesh.sample.sample_surface(mesh, cfg.cloud_points, seed=int(rng.integers(1 << 31)))
     cloud = np.concatenate([points, mesh.face_normals[faces]], axis=1)
@@ -81,15 +84,4 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
             "bbox_corners": f"{object_id}/bbox_corners.npy",
             "unit_inertia": f"{object_id}/unit_inertia.npy",
             "num_hulls": len(hulls), "num_stable_poses": int(len(poses)), "drops": drop_stats,
-            "hull_volume_ratio": union_volume / float(mesh.volume), "timings": timings}
-
-
-def _union_volume(hulls: list[trimesh.Trimesh]) -> float:
-    import manifold3d as mf
-
-    total = None
-    for h in hulls:
-        m = mf.Manifold(mf.Mesh(vert_properties=np.asarray(h.vertices, np.float32),
-                                tri_verts=np.asarray(h.faces, np.uint32)))
-        total = m if total is None else total + m
-    return float(total.volume())
+            "hull_volume_ratio": hull_ratio, "coacd_runs": coacd_runs, "timings": timings}

@@ -158,25 +158,29 @@ class Trainer:
         writer.close()
         bar.close()
         metrics = {"policy": cfg.policy, "global_step": self.global_step,
-                   "updates": self.update_index, "final": self.history[-1] if self.history else {}}
+                   "updates": self.update_index, "final": self.history[-1] if self.history else {},
+                   "history": self.history}
         write_json(self.out / "metrics.json", metrics)
-        plot_learning_curve(self.history, self.out / "plots" / "learning_curve.png", cfg.policy)
+        plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics
 
 
-def plot_learning_curve(history: list[dict], path: Path, label: str) -> None:
+def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
+    """Success rate and return against env steps, one line per run (label -> history rows)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    if not history:
+    runs = {label: history for label, history in runs.items() if history}
+    if not runs:
         return
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
-    steps = [h["step"] for h in history]
-    axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
+    for label, history in runs.items():
+        steps = [h["step"] for h in history]
+        axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
+        axes[1].plot(steps, [h["return"] for h in history], label=label)
     axes[0].set(xlabel="env steps", ylabel="success rate (last 100 episodes)", ylim=(0, 1))
-    axes[1].plot(steps, [h["return"] for h in history], label=label)
     axes[1].set(xlabel="env steps", ylabel="episode return")
     axes[0].legend()
     fig.tight_layout()

@@ -1,0 +1,55 @@
+"""`corn-drake curves`: one learning-curve PNG over several training runs (e.g. corn vs state).
+
+Each run's history comes from its checkpoint (present while the run is still going or was
+killed) or, failing that, its metrics.json. Runs are labelled by their policy.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+NAME = "curves"
+HELP = "plot success rate and return of several training runs on one figure"
+
+
+def add_arguments(parser):
+    parser.add_argument("--run", action="append", required=True, dest="runs",
+                        help="run folder written by `corn-drake train` (repeat for each run)")
+    parser.add_argument("--out", required=True, help="PNG path")
+
+
+def run_history(run_dir: Path) -> tuple[str, list[dict]]:
+    """(label, history rows) of one training run; a clear error when it has neither file."""
+    checkpoint = run_dir / "checkpoints" / "last.pt"
+    metrics = run_dir / "metrics.json"
+    if checkpoint.is_file():
+        import torch
+
+        state = torch.load(checkpoint, map_location="cpu", weights_only=False)
+        history = state["history"]
+    elif metrics.is_file():
+        history = json.loads(metrics.read_text()).get("history")
+        if history is None:
+            raise ValueError(f"{metrics} has no 'history' (written before curves were kept)")
+    else:
+        raise FileNotFoundError(f"{run_dir}: no checkpoints/last.pt or metrics.json; is it a training run?")
+    config = run_dir / "config.yaml"
+    label = run_dir.name
+    if config.is_file():
+        from corn_drake.config import TrainConfig, load_config
+
+        label = f"{load_config(config, TrainConfig).policy} ({run_dir.name})"
+    return label, history
+
+
+def run(args) -> int:
+    from corn_drake.rl.trainer import plot_learning_curves
+
+    runs = dict(run_history(Path(r)) for r in args.runs)
+    for label, history in runs.items():
+        last = history[-1] if history else {}
+        print(f"{label}: {last.get('step', 0)} steps, success {last.get('success_rate', 0.0):.2f}")
+    plot_learning_curves(runs, Path(args.out))
+    print(f"wrote {args.out}")
+    return 0
