@@ -152,6 +152,11 @@ class Trainer:
                     writer.add_scalar(f"train/{key}", value, self.global_step)
             bar.update(steps)
             bar.set_postfix(success=f"{row['success_rate']:.2f}", ret=f"{row['return']:.2f}")
+            if not progress and self.update_index % 10 == 0:
+                # Background runs log to a file: one line every ten updates instead of a bar.
+                print(f"step {self.global_step}: success {row['success_rate']:.2f} return "
+                      f"{row['return']:.3f} kl {row['kl']:.4f} lr {row['lr']:.2e} "
+                      f"{row['steps_per_s']:.0f} steps/s", flush=True)
             if self.update_index % cfg.checkpoint_every == 0:
                 self._save()
         self._save()
