@@ -39,6 +39,8 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
     assert any(p.name.startswith("events") for p in (tmp_path / "tb").iterdir())
     written = json.loads((tmp_path / "metrics.json").read_text())
     assert written["updates"] == 4 and [h["step"] for h in written["history"]] == [32, 64, 96, 128]
+    ppo = resumed.cfg.ppo
+    assert all(1 <= h["gradient_steps"] <= ppo.epochs * ppo.minibatches for h in written["history"])
     # `corn-drake curves` overlays runs from their checkpoints; a folder that is no run is named.
     from argparse import Namespace
 

@@ -140,6 +140,9 @@ class Trainer:
             row = {"step": self.global_step, "update": self.update_index,
                    "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],
                    "lr": stats["lr"], "early_stop": stats["early_stop"],
+                   # Optimiser steps this update took before the KL stop (epochs x minibatches
+                   # when it never stops): the true amount of learning per update.
+                   "gradient_steps": stats["minibatches"],
                    "episodes": len(episodes), "sim_errors": sim_errors,
                    "success_rate": float(np.mean([e["success"] for e in recent])) if recent else 0.0,
                    "return": float(np.mean([e["return"] for e in recent])) if recent else 0.0,
@@ -180,13 +183,20 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
     runs = {label: history for label, history in runs.items() if history}
     if not runs:
         return
+    from matplotlib.ticker import EngFormatter
+
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
     for label, history in runs.items():
+        # Rows before the first finished episode hold placeholder zeros, not measurements.
+        first = next((i for i, h in enumerate(history) if h["episodes"] > 0), len(history))
+        history = history[first:]
         steps = [h["step"] for h in history]
         axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
         axes[1].plot(steps, [h["return"] for h in history], label=label)
     axes[0].set(xlabel="env steps", ylabel="success rate (last 100 episodes)", ylim=(0, 1))
     axes[1].set(xlabel="env steps", ylabel="episode return")
+    for ax in axes:
+        ax.xaxis.set_major_formatter(EngFormatter())  # 100k, 1M: full step counts overlap
     axes[0].legend()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
