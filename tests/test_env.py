@@ -156,3 +156,21 @@ def test_object_scale_is_randomized_through_the_context():
         extent = np.ptp(obs["cloud"], axis=0)
         assert extent.max() <= scale * np.linalg.norm(base) + 1e-6
     assert len(set(np.round(sizes, 6))) == 3
+
+
+def test_near_start_benchmark_puts_the_tool_just_above_the_table_beside_the_object():
+    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.diagrams import load_teacher_config
+    from corn_drake.scene.objects import TABLE_TOP_Z
+
+    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_near.yaml")
+    env = TeacherEnv(cfg)
+    tool = env.scene.plant.GetFrameByName("panda_tool")
+    for seed in range(6):
+        env.reset(seed=seed)
+        X = tool.CalcPoseInWorld(env.plant_context)
+        p_obj = env.episode_info["initial_object_pose"][:3]
+        # Clear of the table but low enough to push without a long approach, pointing down.
+        assert TABLE_TOP_Z + 0.03 <= X.translation()[2] <= TABLE_TOP_Z + 0.12
+        assert X.rotation().matrix()[2, 2] < -0.95
+        assert np.linalg.norm(X.translation()[:2] - p_obj[:2]) >= 0.08 - 1e-9
