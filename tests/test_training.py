@@ -29,6 +29,8 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
     saved_opt = first.ppo.optimizer.state_dict()
     resumed = Trainer(_small_cfg(128), tmp_path)
     assert resumed.global_step == 64 and resumed.update_index == 2
+    # The success/return window continues across the restart (episodes of 20 steps finished).
+    assert first.recent_episodes and resumed.recent_episodes == first.recent_episodes
     for a, b in zip(saved_opt["state"].values(), resumed.ppo.optimizer.state_dict()["state"].values()):
         torch.testing.assert_close(a["exp_avg"], b["exp_avg"])
     for (name, p), q in zip(first.agent.state_dict().items(), resumed.agent.state_dict().values()):

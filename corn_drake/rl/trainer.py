@@ -48,6 +48,9 @@ class Trainer:
         else:
             self.envs = EnvBatch(factory, cfg.envs_per_worker)
         self.global_step, self.update_index, self.history = 0, 0, []
+        # The last 100 finished episodes behind the logged success rate and return; kept in the
+        # checkpoint so a resumed run's curves continue instead of restarting from zero.
+        self.recent_episodes: list[dict] = []
         self.checkpoint_path = self.out / "checkpoints" / "last.pt"
         if self.checkpoint_path.exists():
             self._load()
@@ -57,7 +60,8 @@ class Trainer:
         state = {"agent": self.agent.state_dict(), "ppo": self.ppo.state_dict(),
                  "reward_scaler": self.reward_scaler.state_dict(),
                  "global_step": self.global_step, "update_index": self.update_index,
-                 "history": self.history, "torch_rng": torch.get_rng_state(),
+                 "history": self.history, "recent_episodes": self.recent_episodes,
+                 "torch_rng": torch.get_rng_state(),
                  "generator": self.generator.get_state(),
                  "np_rng": self.np_rng.bit_generator.state, "policy": self.cfg.policy}
         with atomic_path(self.checkpoint_path) as tmp:
@@ -73,6 +77,7 @@ class Trainer:
         self.reward_scaler.load_state_dict(state["reward_scaler"])
         self.global_step, self.update_index = state["global_step"], state["update_index"]
         self.history = state["history"]
+        self.recent_episodes = state.get("recent_episodes", [])  # absent in older checkpoints
         torch.set_rng_state(state["torch_rng"])
         self.generator.set_state(state["generator"])
         self.np_rng.bit_generator.state = state["np_rng"]
@@ -119,7 +124,6 @@ class Trainer:
         obs_np = self.envs.reset()
         bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
                    desc=f"train {cfg.policy}", unit="step")
-        recent: list[dict] = []
         while self.global_step < cfg.total_steps:
             t0 = time.perf_counter()
             buf, last_values, obs_np, episodes, sim_errors = self._collect(obs_np)
@@ -136,7 +140,7 @@ class Trainer:
             steps = cfg.rollout_steps * n_envs
             self.global_step += steps
             self.update_index += 1
-            recent = (recent + episodes)[-100:]
+            self.recent_episodes = recent = (self.recent_episodes + episodes)[-100:]
             row = {"step": self.global_step, "update": self.update_index,
                    "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],
                    "lr": stats["lr"], "early_stop": stats["early_stop"],
