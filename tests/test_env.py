@@ -174,3 +174,36 @@ def test_near_start_benchmark_puts_the_tool_just_above_the_table_beside_the_obje
         assert TABLE_TOP_Z + 0.03 <= X.translation()[2] <= TABLE_TOP_Z + 0.12
         assert X.rotation().matrix()[2, 2] < -0.95
         assert np.linalg.norm(X.translation()[:2] - p_obj[:2]) >= 0.08 - 1e-9
+
+
+def test_push_benchmark_puts_the_goal_beyond_the_object_as_seen_from_the_hand():
+    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.diagrams import load_teacher_config
+
+    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_push.yaml")
+    t = cfg.task
+    env = TeacherEnv(cfg)
+    tool = env.scene.plant.GetFrameByName("panda_tool")
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        hand = tool.CalcPoseInWorld(env.plant_context).translation()[:2]
+        p_obj = env.episode_info["initial_object_pose"][:2]
+        p_goal = env.episode_info["goal_pose"][:2]
+        away, push = p_obj - hand, p_goal - p_obj
+        assert t.object_min_distance_to_hand - 1e-9 <= np.linalg.norm(away) <= t.object_max_distance_to_hand + 1e-9
+        assert t.planar_distance[0] - 1e-9 <= np.linalg.norm(push) <= t.planar_distance[1] + 1e-9
+        angle = np.arccos(away @ push / np.linalg.norm(away) / np.linalg.norm(push))
+        assert angle <= t.planar_heading_spread + 1e-9
+        assert t.goal_x[0] <= p_goal[0] <= t.goal_x[1] and t.goal_y[0] <= p_goal[1] <= t.goal_y[1]
+        assert info["status"]["orientation_error"] < 1e-6  # the goal keeps the start yaw
+
+
+def test_push_benchmark_names_the_ranges_when_no_goal_fits():
+    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.diagrams import load_teacher_config
+
+    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_push.yaml")
+    cfg.task.goal_x, cfg.task.goal_y = [0.5, 0.6], [0.5, 0.6]  # off the table: never reachable
+    env = TeacherEnv(cfg)
+    with pytest.raises(ValueError, match="goal_x"):
+        env.reset(seed=0)

@@ -16,18 +16,21 @@ from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import EnvFactory
 
 
-def _small_cfg(total):
+def _small_cfg(total, init_log_std=0.0):
     cfg = TrainConfig(policy="state", total_steps=total, envs_per_worker=2, rollout_steps=16,
-                      checkpoint_every=1)
+                      checkpoint_every=1, init_log_std=init_log_std)
     cfg.env.task.episode_steps = 20
     return cfg
 
 
 def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
-    first = Trainer(_small_cfg(64), tmp_path)
+    first = Trainer(_small_cfg(64, init_log_std=-0.5), tmp_path)
+    assert torch.equal(first.agent.log_std.detach(), torch.full((20,), -0.5))
     first.train(progress=False)
     saved_opt = first.ppo.optimizer.state_dict()
-    resumed = Trainer(_small_cfg(128), tmp_path)
+    # The checkpoint's trained log-std wins over the initial value (compared with the rest of
+    # the agent below).
+    resumed = Trainer(_small_cfg(128, init_log_std=-0.5), tmp_path)
     assert resumed.global_step == 64 and resumed.update_index == 2
     # The success/return window continues across the restart (episodes of 20 steps finished).
     assert first.recent_episodes and resumed.recent_episodes == first.recent_episodes

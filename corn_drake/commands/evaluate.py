@@ -15,10 +15,13 @@ import numpy as np
 
 NAME = "evaluate"
 HELP = "evaluate a trained teacher policy (success rate, per object) with Meshcat recordings"
+SCRIPTED = "scripted"
 
 
 def add_arguments(parser):
-    parser.add_argument("--run", required=True, help="run folder written by `corn-drake train`")
+    parser.add_argument("--run", required=True,
+                        help="run folder written by `corn-drake train`, or `scripted` for the "
+                             "straight-line pusher (a reference, no learning)")
     parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
     parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
     parser.add_argument("--episodes", type=int, default=10)
@@ -83,14 +86,20 @@ def run(args) -> int:
     from corn_drake.io_utils import write_json
     from corn_drake.rl.checkpoints import load_run
 
-    train_cfg, agent = load_run(args.run)
     cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
-    cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
+    if args.run == SCRIPTED:
+        from corn_drake.rl.scripted import ScriptedPushAgent
+
+        agent, policy = ScriptedPushAgent(cfg.controller), SCRIPTED
+    else:
+        train_cfg, agent = load_run(args.run)
+        policy = train_cfg.policy
+        cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
-    report.update({"run": str(args.run), "policy": train_cfg.policy, "split": args.split})
+    report.update({"run": str(args.run), "policy": policy, "split": args.split})
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")

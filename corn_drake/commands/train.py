@@ -17,6 +17,10 @@ def add_arguments(parser):
     parser.add_argument("--envs-per-worker", type=int, default=4)
     parser.add_argument("--rollout-steps", type=int, default=32)
     parser.add_argument("--minibatches", type=int, default=4, help="PPO minibatches per epoch")
+    parser.add_argument("--init-log-std", type=float, default=0.0,
+                        help="initial log-std of the Gaussian policy (paper: 0)")
+    parser.add_argument("--ppo", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a PPOConfig field, e.g. --ppo lr=1e-4 (repeatable)")
     parser.add_argument("--episode-steps", type=int, default=None, help="override the YAML's step limit")
     parser.add_argument("--config", default=None, help="teacher diagram YAML")
     parser.add_argument("--ray-address", default="", help="connect to a Ray cluster instead of a local one")
@@ -41,8 +45,9 @@ def run(args) -> int:
     cfg = TrainConfig(policy=args.policy, total_steps=args.steps, workers=args.workers,
                       envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
                       seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,
-                      env=env_cfg)
+                      init_log_std=args.init_log_std, env=env_cfg)
     cfg.ppo.minibatches = args.minibatches
+    cfg.ppo = ppo_overrides(cfg.ppo, args.ppo)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save_config(cfg, out / "config.yaml")
@@ -50,3 +55,21 @@ def run(args) -> int:
     metrics = Trainer(cfg, out, encoder).train(progress=not args.no_progress)
     print(f"trained {metrics['global_step']} steps; run folder {out}")
     return 0
+
+
+def ppo_overrides(ppo, items: list[str]):
+    """PPOConfig with `NAME=VALUE` overrides; an unknown name or a bad value is named."""
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(ppo)}
+    changes = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in fields:
+            raise ValueError(f"--ppo {item!r}: expected NAME=VALUE with NAME one of {sorted(fields)}")
+        kind = type(getattr(ppo, name))
+        try:
+            changes[name] = kind(value)
+        except ValueError:
+            raise ValueError(f"--ppo {item!r}: {value!r} is not a {kind.__name__}") from None
+    return dataclasses.replace(ppo, **changes)

@@ -6,7 +6,7 @@ Linear(48 -> 16 x 128) on the context (goal 9, previous action 20, joints 14, ph
 go through MLP 2096 -> 512 -> 256 -> 128 (LayerNorm + ELU), then an actor 128 -> 64 -> 20 with a
 learned state-independent log-std (init 0) and a critic 128 -> 64 -> 1.
 MLPActorCritic: the same trunk on a flat feature vector (the `state` baseline: context + object
-bounding-box keypoints; the `pn` baseline: context + a PointNet global feature).
+bounding-box keypoints + hand pose; the `pn` baseline: context + a PointNet global feature).
 """
 
 from __future__ import annotations

@@ -2,10 +2,10 @@
 
 Variants (the paper's names): `corn` — frozen pretrained patch encoder + cross-attention head;
 `e2e` — the same encoder randomly initialised and trained by PPO; `pn` — a frozen pretrained
-PointNet's global feature + MLP head; `state` — no cloud, the object's bounding-box keypoints +
-MLP head. Cloud, hand pose and keypoints use fixed normalisation ((x - (0, 0, 0.55)) / 0.4, as
-the encoder was pretrained with); the 48-D context (goal, previous action, joints, physics) uses
-running mean/std kept in buffers, so checkpoints carry them.
+PointNet's global feature + MLP head; `state` — no cloud, the object's bounding-box keypoints
+and the hand pose + MLP head. Cloud, hand pose and keypoints use fixed normalisation
+((x - (0, 0, 0.55)) / 0.4, as the encoder was pretrained with); the 48-D context (goal, previous
+action, joints, physics) uses running mean/std kept in buffers, so checkpoints carry them.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ POLICY_KINDS = ("corn", "e2e", "state", "pn")
 CONTEXT_KEYS = ("goal", "previous_action", "robot_state", "physics")
 CLOUD_CENTER = torch.tensor([0.0, 0.0, 0.55])
 CLOUD_SCALE = 0.4
+STATE_FEATURE_DIM = 24 + 9  # bounding-box keypoints + hand state, for the `state` baseline
 
 # An encoder maps (normalised cloud (B, N, 3), normalised hand state (B, 9)) to tokens
 # (B, T, D) for `corn` / `e2e`, or to a global feature (B, F) for `pn`.
@@ -61,7 +62,7 @@ class TeacherAgent(nn.Module):
         elif kind == "pn":
             self.head = MLPActorCritic(feature_dim or 1024)
         else:
-            self.head = MLPActorCritic(24)
+            self.head = MLPActorCritic(STATE_FEATURE_DIM)
         self.log_std = self.head.log_std
         self.register_buffer("ctx_mean", torch.zeros(CONTEXT_DIM, dtype=torch.float64))
         self.register_buffer("ctx_var", torch.ones(CONTEXT_DIM, dtype=torch.float64))
@@ -82,7 +83,10 @@ class TeacherAgent(nn.Module):
 
     def features(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         if self.kind == "state":
-            return normalize_points(obs["object_keypoints"].reshape(-1, 8, 3)).flatten(1)
+            # The hand pose too: corn/e2e/pn see it through the encoder's hand token, and
+            # without it the state policy would have to learn the arm's kinematics from joints.
+            keypoints = normalize_points(obs["object_keypoints"].reshape(-1, 8, 3)).flatten(1)
+            return torch.cat([keypoints, normalize_hand(obs["hand_state"])], dim=-1)
         cloud, hand = normalize_points(obs["cloud"]), normalize_hand(obs["hand_state"])
         if self.kind == "e2e":
             return self.encoder(cloud, hand)

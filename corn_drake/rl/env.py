@@ -85,13 +85,16 @@ class TeacherEnv(gym.Env):
         half = np.maximum(half, 0.0)
         for _ in range(1000):
             xy = rng.uniform(-half, half)
-            if np.linalg.norm(xy - hand_xy) >= t.object_min_distance_to_hand:
+            if (t.object_min_distance_to_hand <= np.linalg.norm(xy - hand_xy)
+                    <= t.object_max_distance_to_hand):
                 break
         init = poses[rng.integers(len(poses))]
         R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
         p0 = np.array([xy[0] + init[0], xy[1] + init[1], init[2]])
+        if t.goal_mode == "planar" and t.planar_heading_spread is not None:
+            return self._push_from_hand(rng, init, R0, half, hand_xy)
         if t.goal_mode == "planar":
-            return p0, R0, *self._planar_goal(rng, p0, R0)
+            return p0, R0, *self._planar_goal(rng, p0, R0, hand_xy)
         if t.goal_mode != "full":
             raise ValueError(f"task.goal_mode must be 'full' or 'planar', got {t.goal_mode!r}")
         # Thin objects (cards, plates) only get yaw goals: they cannot be stood up by pushing.
@@ -104,11 +107,14 @@ class TeacherEnv(gym.Env):
         pg = np.array([gxy[0] + goal[0], gxy[1] + goal[1], goal[2]])
         return p0, R0, pg, Rg
 
-    def _planar_goal(self, rng, p0: np.ndarray, R0: np.ndarray):
+    def _goal_region(self) -> tuple[np.ndarray, np.ndarray]:
+        t = self.cfg.task
+        return np.array([t.goal_x[0], t.goal_y[0]]), np.array([t.goal_x[1], t.goal_y[1]])
+
+    def _planar_goal(self, rng, p0: np.ndarray, R0: np.ndarray, hand_xy: np.ndarray):
         """Same resting face, moved planar_distance and turned up to planar_max_yaw."""
         t = self.cfg.task
-        lo = np.array([t.goal_x[0], t.goal_y[0]])
-        hi = np.array([t.goal_x[1], t.goal_y[1]])
+        lo, hi = self._goal_region()
         for _ in range(1000):
             heading = rng.uniform(-np.pi, np.pi)
             gxy = p0[:2] + rng.uniform(*t.planar_distance) * np.array([np.cos(heading), np.sin(heading)])
@@ -116,6 +122,31 @@ class TeacherEnv(gym.Env):
                 break
         Rg = yaw_matrix(rng.uniform(-t.planar_max_yaw, t.planar_max_yaw)) @ R0
         return np.array([gxy[0], gxy[1], p0[2]]), Rg
+
+    def _push_from_hand(self, rng, init: np.ndarray, R0: np.ndarray, half: np.ndarray,
+                        hand_xy: np.ndarray):
+        """Object and goal drawn together: the object within the hand-distance range, the goal
+        planar_distance beyond it, within +- planar_heading_spread of the hand-to-object
+        direction and inside the goal region."""
+        t = self.cfg.task
+        lo, hi = self._goal_region()
+        for _ in range(1000):
+            xy = rng.uniform(-half, half)
+            away = xy - hand_xy
+            if not t.object_min_distance_to_hand <= np.linalg.norm(away) <= t.object_max_distance_to_hand:
+                continue
+            heading = np.arctan2(away[1], away[0]) + rng.uniform(-t.planar_heading_spread,
+                                                                 t.planar_heading_spread)
+            gxy = xy + rng.uniform(*t.planar_distance) * np.array([np.cos(heading), np.sin(heading)])
+            if np.all(gxy >= lo) and np.all(gxy <= hi):
+                p0 = np.array([xy[0] + init[0], xy[1] + init[1], init[2]])
+                Rg = yaw_matrix(rng.uniform(-t.planar_max_yaw, t.planar_max_yaw)) @ R0
+                return p0, R0, np.array([gxy[0] + init[0], gxy[1] + init[1], p0[2]]), Rg
+        raise ValueError(
+            f"task: no object/goal pair in 1000 draws with the object "
+            f"{t.object_min_distance_to_hand}-{t.object_max_distance_to_hand} m from the hand at "
+            f"{hand_xy.round(3).tolist()}, planar_distance {t.planar_distance} and goal_x "
+            f"{t.goal_x} / goal_y {t.goal_y}; widen the ranges")
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -69,3 +69,45 @@ class ScriptedPush:
                 and np.linalg.norm(self.waypoints[self.index] - p) < self.tolerance):
             self.index += 1
         return action_towards(p, R, self.waypoints[self.index], self.cfg)
+
+
+class ScriptedPushAgent:
+    """A stateless straight-line pusher with the learned policies' interface (`act(obs)`).
+
+    From the observation alone: the object's centre and footprint from its bounding-box
+    keypoints, the goal from the relative goal. Go to a point behind the object on the
+    goal line (above the object while passing over it), descend, then push the tool through
+    the goal's position. A reference for the push benchmark (`corn-drake evaluate --run
+    scripted`), not a learned policy: it knows nothing about how objects turn or roll.
+    """
+
+    kind = "scripted"
+
+    def __init__(self, cfg: ControllerConfig, push_height: float = 0.02, clearance: float = 0.03,
+                 lateral_tolerance: float = 0.03):
+        self.cfg = cfg
+        self.push_height, self.clearance = push_height, clearance
+        self.lateral_tolerance = lateral_tolerance
+
+    def act(self, obs: dict) -> np.ndarray:
+        corners = np.asarray(obs["object_keypoints"], float).reshape(8, 3)
+        c = corners[:, :2].mean(axis=0)
+        radius = float(np.max(np.linalg.norm(corners[:, :2] - c, axis=1)))
+        to_goal = np.asarray(obs["goal"], float)[:2]
+        u = to_goal / max(np.linalg.norm(to_goal), 1e-6)
+        hand = np.asarray(obs["hand_state"], float)
+        p, R = hand[:3], np.column_stack([hand[3:6], hand[6:9], np.cross(hand[3:6], hand[6:9])])
+        z_push = TABLE_TOP_Z + self.push_height
+        z_over = corners[:, 2].max() + self.clearance
+        rel = p[:2] - c
+        along, lateral = rel @ u, np.linalg.norm(rel - (rel @ u) * u)
+        behind = c - (radius + self.clearance) * u
+        if along <= -radius and lateral <= self.lateral_tolerance:
+            # Lined up behind the object: down to push height, then through the goal.
+            target = np.array([*(c + to_goal), z_push]) if p[2] < z_push + 0.01 else np.array([*p[:2], z_push])
+        else:
+            # Not lined up: travel to the pre-push point, over the object if the path crosses it.
+            near = np.linalg.norm(rel) < radius + self.clearance
+            z = z_over if near or np.linalg.norm(p[:2] - behind) > self.lateral_tolerance else z_push
+            target = np.array([*behind, max(z, z_push)])
+        return action_towards(p, R, target, self.cfg)

@@ -36,6 +36,8 @@ class Trainer:
         self.np_rng = np.random.default_rng(cfg.seed)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.agent = TeacherAgent(cfg.policy, encoder)
+        with torch.no_grad():
+            self.agent.log_std.fill_(cfg.init_log_std)
         self.ppo = PPO(self.agent, cfg.ppo)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         self.reward_scaler = RewardScaler(n_envs, cfg.ppo.gamma)
