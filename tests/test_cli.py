@@ -45,7 +45,7 @@ def test_train_then_evaluate_writes_the_report_keys(tmp_path):
     assert html and Path(html).stat().st_size > 10_000
 
 
-def test_scripted_reference_pushes_the_box_to_its_goal(tmp_path):
+def test_reference_controllers_evaluate_on_the_push_benchmark(tmp_path):
     """`evaluate --run scripted` runs the straight-line pusher in the evaluation diagram; on the
     push benchmark's box it must reach the goal in some episodes (it does in ~3 of 4)."""
     from corn_drake import DIAGRAMS_DIR
@@ -61,6 +61,13 @@ def test_scripted_reference_pushes_the_box_to_its_goal(tmp_path):
     for e in data["episodes"]:
         if e["success"]:
             assert e["steps"] < 100 and e["position_error"] <= 0.05
+    # The zero-action reference leaves the box where it is: no success, full-length episodes.
+    assert main(["evaluate", "--run", "still", "--config",
+                 str(DIAGRAMS_DIR / "reduced_benchmark_push.yaml"), "--episodes", "2",
+                 "--record", "0", "--report", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert data["policy"] == "still" and data["success_rate"] == 0.0
+    assert all(e["steps"] == 100 for e in data["episodes"])
 
 
 def test_train_ppo_overrides_change_fields_and_name_bad_input():

@@ -30,3 +30,22 @@ def test_policy_system_matches_training_path_and_runs_closed_loop():
     eval_env.cfg.task.episode_steps = 5
     steps, ret, status, info = eval_env.run_closed_loop()
     assert 1 <= steps <= 5 and np.isfinite(ret) and "success" in status
+
+
+def test_sampled_actions_follow_the_policy_distribution_and_its_seed():
+    torch.manual_seed(0)
+    agent = TeacherAgent("state")
+    obs, _ = TeacherEnv().reset(seed=3)
+    mean = agent.act(obs)
+    with torch.no_grad():
+        agent.log_std.fill_(-2.0)  # std 0.135: samples stay near the mean, mostly unclipped
+    agent.action_noise = torch.Generator().manual_seed(5)
+    draws = np.stack([agent.act(obs) for _ in range(400)])
+    assert np.all(np.abs(draws) <= 1.0)
+    inside = np.abs(mean) < 0.6  # dimensions whose samples are rarely clipped
+    np.testing.assert_allclose(draws.mean(0)[inside], mean[inside], atol=0.03)
+    np.testing.assert_allclose(draws.std(0)[inside], np.exp(-2.0), rtol=0.15)
+    agent.action_noise = torch.Generator().manual_seed(5)
+    np.testing.assert_array_equal(agent.act(obs), draws[0])  # same seed, same first sample
+    agent.action_noise = None
+    np.testing.assert_array_equal(agent.act(obs), mean)

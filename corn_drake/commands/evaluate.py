@@ -15,13 +15,14 @@ import numpy as np
 
 NAME = "evaluate"
 HELP = "evaluate a trained teacher policy (success rate, per object) with Meshcat recordings"
-SCRIPTED = "scripted"
+# Reference controllers `--run` accepts in place of a run folder (corn_drake/rl/scripted.py).
+REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
     parser.add_argument("--run", required=True,
-                        help="run folder written by `corn-drake train`, or `scripted` for the "
-                             "straight-line pusher (a reference, no learning)")
+                        help="run folder written by `corn-drake train`, or a reference: "
+                             "`scripted` (straight-line pusher) or `still` (zero action)")
     parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
     parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
     parser.add_argument("--episodes", type=int, default=10)
@@ -29,6 +30,8 @@ def add_arguments(parser):
     parser.add_argument("--config", default=None,
                         help="evaluation diagram YAML (default: diagrams/evaluation.yaml)")
     parser.add_argument("--seed", type=int, default=1000)
+    parser.add_argument("--stochastic", action="store_true",
+                        help="sample actions from the policy (as in training) instead of its mean")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -87,19 +90,25 @@ def run(args) -> int:
     from corn_drake.rl.checkpoints import load_run
 
     cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
-    if args.run == SCRIPTED:
-        from corn_drake.rl.scripted import ScriptedPushAgent
+    if args.run in REFERENCES:
+        from corn_drake.rl import scripted
 
-        agent, policy = ScriptedPushAgent(cfg.controller), SCRIPTED
+        agent = getattr(scripted, REFERENCES[args.run])(cfg.controller)
+        policy = args.run
     else:
         train_cfg, agent = load_run(args.run)
         policy = train_cfg.policy
+        if args.stochastic:
+            import torch
+
+            agent.action_noise = torch.Generator().manual_seed(args.seed)
         cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
-    report.update({"run": str(args.run), "policy": policy, "split": args.split})
+    report.update({"run": str(args.run), "policy": policy, "split": args.split,
+                   "actions": "sampled" if args.stochastic and policy not in REFERENCES else "mean"})
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")

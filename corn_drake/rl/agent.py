@@ -67,6 +67,9 @@ class TeacherAgent(nn.Module):
         self.register_buffer("ctx_mean", torch.zeros(CONTEXT_DIM, dtype=torch.float64))
         self.register_buffer("ctx_var", torch.ones(CONTEXT_DIM, dtype=torch.float64))
         self.register_buffer("ctx_count", torch.tensor(1e-4, dtype=torch.float64))
+        # None: act() returns the Gaussian mean (evaluation's default). A generator: act()
+        # samples from the policy, as during training (`corn-drake evaluate --stochastic`).
+        self.action_noise: torch.Generator | None = None
 
     def update_normalizer(self, context: torch.Tensor) -> None:
         x = context.detach().to(torch.float64).reshape(-1, CONTEXT_DIM)
@@ -97,10 +100,13 @@ class TeacherAgent(nn.Module):
         return self.head(self.features(obs), self.normalized_context(obs["context"]))
 
     def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        """Deterministic action (the Gaussian mean), clipped to [-1, 1], for one or many obs."""
+        """Action clipped to [-1, 1], for one or many obs: the Gaussian mean, or a sample from
+        the policy when `action_noise` holds a generator."""
         single = np.asarray(obs["goal"]).ndim == 1
         batch = {k: np.asarray(v)[None] for k, v in obs.items()} if single else obs
         with torch.no_grad():
             mu, _ = self(obs_to_tensors(batch))
+            if self.action_noise is not None:
+                mu = mu + self.log_std.exp() * torch.randn(mu.shape, generator=self.action_noise)
         action = mu.clamp(-1, 1).numpy().astype(np.float64)
         return action[0] if single else action

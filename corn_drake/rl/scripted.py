@@ -11,6 +11,7 @@ import numpy as np
 
 from corn_drake.config import ControllerConfig
 from corn_drake.scene.objects import TABLE_TOP_Z
+from corn_drake.systems.ik import ACTION_DIM
 
 # Tool frame pointing down (tool z = world -z), fingers spanning world y.
 R_DOWN = np.diag([1.0, -1.0, -1.0])
@@ -111,3 +112,16 @@ class ScriptedPushAgent:
             z = z_over if near or np.linalg.norm(p[:2] - behind) > self.lateral_tolerance else z_push
             target = np.array([*behind, max(z, z_push)])
         return action_towards(p, R, target, self.cfg)
+
+
+class HoldStillAgent:
+    """The zero action (no residual, mid-range gains): the floor a learned policy must beat —
+    objects that roll or settle into the goal by themselves count as its successes."""
+
+    kind = "still"
+
+    def __init__(self, cfg: ControllerConfig | None = None):
+        self.cfg = cfg
+
+    def act(self, obs: dict) -> np.ndarray:
+        return np.zeros(ACTION_DIM)
