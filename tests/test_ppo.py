@@ -10,9 +10,11 @@ from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 
 
 class _FlatPolicy(nn.Module):
-    def __init__(self):
+    """The teacher's MLP trunk on a flat observation `x` (as both features and context)."""
+
+    def __init__(self, obs_dim: int = 4, action_dim: int = 3):
         super().__init__()
-        self.net = MLPActorCritic(feature_dim=4, context_dim=4, action_dim=3)
+        self.net = MLPActorCritic(feature_dim=obs_dim, context_dim=obs_dim, action_dim=action_dim)
         self.log_std = self.net.log_std
 
     def forward(self, obs):
@@ -147,18 +149,6 @@ def test_an_update_cut_short_does_not_leave_a_raised_lr(monkeypatch):
     assert all(g["lr"] == ppo.lr for g in ppo.optimizer.param_groups)
 
 
-class _ReachPolicy(nn.Module):
-    """The teacher's MLP trunk on a 2-D point: features = context = its position."""
-
-    def __init__(self):
-        super().__init__()
-        self.net = MLPActorCritic(feature_dim=2, context_dim=2, action_dim=2)
-        self.log_std = self.net.log_std
-
-    def forward(self, obs):
-        return self.net(obs["x"], obs["x"])
-
-
 def _reach_rollout(policy, x, generator, steps=10):
     """Points move by 0.1 x clipped action; reward = decrease of the distance to the origin."""
     buf = {k: [] for k in ("obs", "actions", "logp", "values", "rewards")}
@@ -186,7 +176,7 @@ def test_ppo_with_the_paper_settings_learns_a_reach_task():
     policy that drives 2-D points to the origin must come out of 40 updates."""
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(0)
-    policy = _ReachPolicy()
+    policy = _FlatPolicy(obs_dim=2, action_dim=2)  # a 2-D point: obs = its position
     ppo, cfg = PPO(policy), PPOConfig()
 
     def final_distance() -> float:
