@@ -20,6 +20,8 @@ from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 from corn_drake.rl.vec_env import EnvBatch, EnvFactory
 
+WINDOW = 100  # finished episodes behind the logged success rate and return
+
 
 def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """For frozen encoders, compute features once at collection time, not every PPO epoch."""
@@ -142,7 +144,7 @@ class Trainer:
             steps = cfg.rollout_steps * n_envs
             self.global_step += steps
             self.update_index += 1
-            self.recent_episodes = recent = (self.recent_episodes + episodes)[-100:]
+            self.recent_episodes = recent = (self.recent_episodes + episodes)[-WINDOW:]
             row = {"step": self.global_step, "update": self.update_index,
                    "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],
                    "lr": stats["lr"], "early_stop": stats["early_stop"],
@@ -193,8 +195,13 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
     for label, history in runs.items():
-        # Rows before the first finished episode hold placeholder zeros, not measurements.
-        first = next((i for i, h in enumerate(history) if h["episodes"] > 0), len(history))
+        # Rows before the first finished episode hold placeholder zeros, and those before the
+        # window holds WINDOW episodes average over the few that ended first — mostly early
+        # successes, since a success ends an episode. Plot from a full window (or, for runs
+        # that never fill it, from the first finished episode).
+        done = np.cumsum([h["episodes"] for h in history])
+        full = np.flatnonzero(done >= WINDOW)
+        first = int(full[0]) if len(full) else int(np.argmax(done > 0)) if done[-1] else len(history)
         history = history[first:]
         steps = [h["step"] for h in history]
         axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
