@@ -190,7 +190,8 @@ def test_push_benchmark_puts_the_goal_beyond_the_object_as_seen_from_the_hand():
         p_obj = env.episode_info["initial_object_pose"][:2]
         p_goal = env.episode_info["goal_pose"][:2]
         away, push = p_obj - hand, p_goal - p_obj
-        assert t.object_min_distance_to_hand - 1e-9 <= np.linalg.norm(away) <= t.object_max_distance_to_hand + 1e-9
+        distance = np.linalg.norm(away)
+        assert t.object_min_distance_to_hand - 1e-9 <= distance <= t.object_max_distance_to_hand + 1e-9
         assert t.planar_distance[0] - 1e-9 <= np.linalg.norm(push) <= t.planar_distance[1] + 1e-9
         angle = np.arccos(away @ push / np.linalg.norm(away) / np.linalg.norm(push))
         assert angle <= t.planar_heading_spread + 1e-9

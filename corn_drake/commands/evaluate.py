@@ -91,6 +91,9 @@ def run(args) -> int:
 
     cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
     if args.run in REFERENCES:
+        if args.stochastic:
+            raise ValueError(f"--stochastic samples a learned policy; --run {args.run} is a "
+                             "deterministic reference controller")
         from corn_drake.rl import scripted
 
         agent = getattr(scripted, REFERENCES[args.run])(cfg.controller)
@@ -108,7 +111,7 @@ def run(args) -> int:
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
     report.update({"run": str(args.run), "policy": policy, "split": args.split,
-                   "actions": "sampled" if args.stochastic and policy not in REFERENCES else "mean"})
+                   "actions": "sampled" if args.stochastic else "mean"})
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")

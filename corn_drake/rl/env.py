@@ -83,6 +83,8 @@ class TeacherEnv(gym.Env):
         t, spec = self.cfg.task, self.scene.object_spec
         half = np.asarray(self.cfg.scene.table_size[:2]) / 2 * TABLE_MARGIN - radius
         half = np.maximum(half, 0.0)
+        if t.goal_mode == "planar" and t.planar_heading_spread is not None:
+            return self._push_from_hand(rng, poses, half, hand_xy)
         for _ in range(1000):
             xy = rng.uniform(-half, half)
             if (t.object_min_distance_to_hand <= np.linalg.norm(xy - hand_xy)
@@ -91,8 +93,6 @@ class TeacherEnv(gym.Env):
         init = poses[rng.integers(len(poses))]
         R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
         p0 = np.array([xy[0] + init[0], xy[1] + init[1], init[2]])
-        if t.goal_mode == "planar" and t.planar_heading_spread is not None:
-            return self._push_from_hand(rng, init, R0, half, hand_xy)
         if t.goal_mode == "planar":
             return p0, R0, *self._planar_goal(rng, p0, R0, hand_xy)
         if t.goal_mode != "full":
@@ -123,17 +123,19 @@ class TeacherEnv(gym.Env):
         Rg = yaw_matrix(rng.uniform(-t.planar_max_yaw, t.planar_max_yaw)) @ R0
         return np.array([gxy[0], gxy[1], p0[2]]), Rg
 
-    def _push_from_hand(self, rng, init: np.ndarray, R0: np.ndarray, half: np.ndarray,
-                        hand_xy: np.ndarray):
+    def _push_from_hand(self, rng, poses: np.ndarray, half: np.ndarray, hand_xy: np.ndarray):
         """Object and goal drawn together: the object within the hand-distance range, the goal
         planar_distance beyond it, within +- planar_heading_spread of the hand-to-object
-        direction and inside the goal region."""
+        direction and inside the goal region; same resting face, yaw up to planar_max_yaw."""
         t = self.cfg.task
         lo, hi = self._goal_region()
+        init = poses[rng.integers(len(poses))]
+        R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
         for _ in range(1000):
             xy = rng.uniform(-half, half)
             away = xy - hand_xy
-            if not t.object_min_distance_to_hand <= np.linalg.norm(away) <= t.object_max_distance_to_hand:
+            distance = np.linalg.norm(away)
+            if not t.object_min_distance_to_hand <= distance <= t.object_max_distance_to_hand:
                 continue
             heading = np.arctan2(away[1], away[0]) + rng.uniform(-t.planar_heading_spread,
                                                                  t.planar_heading_spread)

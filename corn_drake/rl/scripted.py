@@ -82,8 +82,6 @@ class ScriptedPushAgent:
     scripted`), not a learned policy: it knows nothing about how objects turn or roll.
     """
 
-    kind = "scripted"
-
     def __init__(self, cfg: ControllerConfig, push_height: float = 0.02, clearance: float = 0.03,
                  lateral_tolerance: float = 0.03):
         self.cfg = cfg
@@ -105,11 +103,13 @@ class ScriptedPushAgent:
         behind = c - (radius + self.clearance) * u
         if along <= -radius and lateral <= self.lateral_tolerance:
             # Lined up behind the object: down to push height, then through the goal.
-            target = np.array([*(c + to_goal), z_push]) if p[2] < z_push + 0.01 else np.array([*p[:2], z_push])
+            low = p[2] < z_push + 0.01
+            target = np.array([*(c + to_goal), z_push]) if low else np.array([*p[:2], z_push])
         else:
             # Not lined up: travel to the pre-push point, over the object if the path crosses it.
             near = np.linalg.norm(rel) < radius + self.clearance
-            z = z_over if near or np.linalg.norm(p[:2] - behind) > self.lateral_tolerance else z_push
+            away = np.linalg.norm(p[:2] - behind) > self.lateral_tolerance
+            z = z_over if near or away else z_push
             target = np.array([*behind, max(z, z_push)])
         return action_towards(p, R, target, self.cfg)
 
@@ -117,8 +117,6 @@ class ScriptedPushAgent:
 class HoldStillAgent:
     """The zero action (no residual, mid-range gains): the floor a learned policy must beat —
     objects that roll or settle into the goal by themselves count as its successes."""
-
-    kind = "still"
 
     def __init__(self, cfg: ControllerConfig | None = None):
         self.cfg = cfg
