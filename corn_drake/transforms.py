@@ -15,6 +15,12 @@ def pose9(p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return np.concatenate([p, rot6d(R)])
 
 
+def from_pose9(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(p, R) back from pose9's encoding (columns orthonormal, as pose9 writes them)."""
+    x = np.asarray(x, float)
+    return x[:3], np.column_stack([x[3:6], x[6:9], np.cross(x[3:6], x[6:9])])
+
+
 def rotation_angle(R: np.ndarray) -> float:
     """Angle (rad) of a rotation matrix, robust near 0 and pi."""
     c = (np.trace(R) - 1.0) / 2.0

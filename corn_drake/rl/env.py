@@ -94,7 +94,7 @@ class TeacherEnv(gym.Env):
         R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
         p0 = np.array([xy[0] + init[0], xy[1] + init[1], init[2]])
         if t.goal_mode == "planar":
-            return p0, R0, *self._planar_goal(rng, p0, R0, hand_xy)
+            return p0, R0, *self._planar_goal(rng, p0, R0)
         if t.goal_mode != "full":
             raise ValueError(f"task.goal_mode must be 'full' or 'planar', got {t.goal_mode!r}")
         # Thin objects (cards, plates) only get yaw goals: they cannot be stood up by pushing.
@@ -111,7 +111,7 @@ class TeacherEnv(gym.Env):
         t = self.cfg.task
         return np.array([t.goal_x[0], t.goal_y[0]]), np.array([t.goal_x[1], t.goal_y[1]])
 
-    def _planar_goal(self, rng, p0: np.ndarray, R0: np.ndarray, hand_xy: np.ndarray):
+    def _planar_goal(self, rng, p0: np.ndarray, R0: np.ndarray):
         """Same resting face, moved planar_distance and turned up to planar_max_yaw."""
         t = self.cfg.task
         lo, hi = self._goal_region()

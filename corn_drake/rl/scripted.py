@@ -12,6 +12,7 @@ import numpy as np
 from corn_drake.config import ControllerConfig
 from corn_drake.scene.objects import TABLE_TOP_Z
 from corn_drake.systems.ik import ACTION_DIM
+from corn_drake.transforms import from_pose9
 
 # Tool frame pointing down (tool z = world -z), fingers spanning world y.
 R_DOWN = np.diag([1.0, -1.0, -1.0])
@@ -63,9 +64,7 @@ class ScriptedPush:
         return cls(cfg, object_xy, direction, distance=distance, **kwargs)
 
     def __call__(self, hand_state: np.ndarray) -> np.ndarray:
-        p = hand_state[:3]
-        R = np.column_stack([hand_state[3:6], hand_state[6:9],
-                             np.cross(hand_state[3:6], hand_state[6:9])])
+        p, R = from_pose9(hand_state)
         if (self.index < len(self.waypoints) - 1
                 and np.linalg.norm(self.waypoints[self.index] - p) < self.tolerance):
             self.index += 1
@@ -94,8 +93,7 @@ class ScriptedPushAgent:
         radius = float(np.max(np.linalg.norm(corners[:, :2] - c, axis=1)))
         to_goal = np.asarray(obs["goal"], float)[:2]
         u = to_goal / max(np.linalg.norm(to_goal), 1e-6)
-        hand = np.asarray(obs["hand_state"], float)
-        p, R = hand[:3], np.column_stack([hand[3:6], hand[6:9], np.cross(hand[3:6], hand[6:9])])
+        p, R = from_pose9(obs["hand_state"])
         z_push = TABLE_TOP_Z + self.push_height
         z_over = corners[:, 2].max() + self.clearance
         rel = p[:2] - c
