@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 
 from corn_drake import commands
+from corn_drake.errors import InputError
 
 
 def _command_modules():
@@ -26,6 +28,8 @@ def _command_modules():
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="corn-drake", description=__doc__.splitlines()[0])
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an input error (or set CORN_DRAKE_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _command_modules():
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
@@ -36,7 +40,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args._run(args) or 0)
+    debug = args.debug or os.environ.get("CORN_DRAKE_DEBUG", "") not in ("", "0")
+    try:
+        return int(args._run(args) or 0)
+    except InputError as e:
+        if debug:
+            raise
+        # One line, like argparse's own errors: the user's input is wrong, not the program.
+        print(f"corn-drake {args.command}: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

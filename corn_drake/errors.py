@@ -1,0 +1,13 @@
+"""The one exception type for a user's bad input: a wrong argument, a missing or corrupt file.
+
+`corn-drake` prints such an error as one line naming the argument or file and exits non-zero,
+with no traceback (`--debug` or CORN_DRAKE_DEBUG=1 shows it). Anything else that escapes a
+command is a bug and keeps its traceback. It subclasses ValueError so library callers that
+already catch ValueError for bad configs keep working.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad input from the user; the message must name the argument, field or file."""
