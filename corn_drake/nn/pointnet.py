@@ -43,7 +43,18 @@ class PointNetContactModel(nn.Module):
                                   nn.Linear(128, 1))
 
     def forward(self, points: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
-        """Per-point contact logits (B, N)."""
+        """Per-point contact logits (B, N).
+
+        The head's first Linear reads [point feature (64), global feature (1024)]. Its
+        global-feature half is the same for every point of a cloud, so it is applied once per
+        cloud and broadcast: the same function as concatenating and applying it to all N
+        points, at about half the step's FLOPs (the 1024-wide half dominated the head)."""
         first, pooled = self.encoder.point_features(points, hand)
-        x = torch.cat([first, pooled.unsqueeze(1).expand(-1, points.shape[1], -1)], dim=-1)
-        return self.head(x).squeeze(-1)
+        linear = self.head[0]
+        k = first.shape[-1]
+        per_point = first @ linear.weight[:, :k].T + linear.bias
+        per_cloud = pooled @ linear.weight[:, k:].T
+        x = per_point + per_cloud.unsqueeze(1)
+        for layer in self.head[1:]:
+            x = layer(x)
+        return x.squeeze(-1)
