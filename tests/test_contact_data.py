@@ -31,7 +31,9 @@ def test_layout_shapes_and_positive_fraction(dataset):
     assert train["hand_pose"].shape == (1500, 7) and train["object_pose"].shape == (1500, 7)
     assert set(train["object_id"]) <= {"box_a", "box_b", "cyl_a"}
     assert set(load_split(root / "data", "unseen")["object_id"]) == {"cyl_u"}
-    assert 0.4 <= manifest["splits"]["train"]["positive_sample_fraction"] <= 0.8
+    # The nearest point ends at signed distance ~ N(-0.03, 0.05^2): about 70 % penetrate, as the
+    # generator's docstring says (it once said "roughly half").
+    assert 0.62 <= manifest["splits"]["train"]["positive_sample_fraction"] <= 0.78
     # Radii follow U(0.04, 0.12): the scaled cloud's extent stays inside 2 * 0.12.
     assert np.ptp(train["points"], axis=1).max() <= 0.24 + 1e-4
 

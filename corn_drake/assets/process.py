@@ -17,7 +17,9 @@ from corn_drake.scene.objects import ObjectSpec
 
 @dataclasses.dataclass
 class ProcessConfig:
-    radius: tuple[float, float] = (0.05, 0.10)  # the paper's object-radius range (m)
+    # Object radius range (m) from the authors' code's domain randomisation (the paper itself
+    # gives a 0.1-0.3 m scale); contact data uses its own U(0.04, 0.12) (contact/generate.py).
+    radius: tuple[float, float] = (0.05, 0.10)
     density: float = 300.0  # kg/m^3, the authors' DexGraspNet conversion
     cloud_points: int = 2048
     thin_ratio: float = 2.5
