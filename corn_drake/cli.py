@@ -26,15 +26,24 @@ def _command_modules():
             yield module
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse without the usage block on an error: one line naming the argument, exit 2, the
+    same shape as an InputError's. Subcommand parsers inherit the class (add_subparsers uses
+    the parent's type), so `corn-drake train --steps 0` reads `corn-drake train: error: ...`."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="corn-drake", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="corn-drake", description=__doc__.splitlines()[0])
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an input error (or set CORN_DRAKE_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _command_modules():
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _prog=p.prog)
     return parser
 
 
@@ -47,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         # One line, like argparse's own errors: the user's input is wrong, not the program.
-        print(f"corn-drake {args.command}: error: {e}", file=sys.stderr)
+        print(f"{args._prog}: error: {e}", file=sys.stderr)
         return 2
 
 

@@ -7,8 +7,11 @@ No `from __future__ import annotations` here: yaml_load_typed needs real types o
 
 
 import dataclasses as dc
+import typing
 from pathlib import Path
 from typing import TypeVar
+
+from corn_drake.errors import InputError, MissingInputError
 
 T = TypeVar("T")
 
@@ -202,22 +205,68 @@ class PretrainConfig:
 
 
 def load_config(path: str | Path, schema: type[T]) -> T:
-    """Loads a YAML file into `schema`; unknown keys or bad values raise naming the file."""
-    from pydrake.common.yaml import yaml_load_typed
-
+    """Loads a YAML file into `schema`; a missing file, bad YAML, an unknown key or a value of
+    the wrong type raises an InputError naming the file (and the field, where there is one)."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"config file not found: {path}")
-    try:
-        return yaml_load_typed(schema=schema, filename=str(path))
-    except RuntimeError as e:
-        raise ValueError(f"invalid config {path}: {e}") from e
+        raise MissingInputError(f"config file not found: {path}")
+    return _load_typed(schema, str(path), filename=str(path))
 
 
 def load_config_string(text: str, schema: type[T], name: str = "<string>") -> T:
+    return _load_typed(schema, name, data=text)
+
+
+# What drake's yaml_load_typed raises for a value the schema cannot take: RuntimeError names
+# the key; a scalar it cannot convert leaks a bare ValueError/TypeError; a scalar where a
+# mapping belongs fails one of its asserts.
+_LOAD_ERRORS = (RuntimeError, ValueError, TypeError, AssertionError)
+
+
+def _load_typed(schema: type[T], name: str, **source) -> T:
     from pydrake.common.yaml import yaml_load_typed
+    import yaml
 
     try:
-        return yaml_load_typed(schema=schema, data=text)
+        return yaml_load_typed(schema=schema, **source)
+    except UnicodeDecodeError:
+        raise InputError(f"invalid config {name}: not a UTF-8 text file") from None
+    except yaml.YAMLError as e:
+        raise InputError(f"invalid config {name}: not valid YAML ({_one_line(e)})") from e
     except RuntimeError as e:
-        raise ValueError(f"invalid config {name}: {e}") from e
+        raise InputError(f"invalid config {name}: {_one_line(e)}") from e
+    except _LOAD_ERRORS as e:
+        text = source["data"] if "data" in source else Path(source["filename"]).read_text()
+        found = _failing_field(schema, yaml.safe_load(text))
+        # drake's asserts carry only the offending value as their message.
+        detail = "wrong type" if isinstance(e, AssertionError) else _one_line(e)
+        if found is None:
+            raise InputError(f"invalid config {name}: {detail}") from e
+        field, value = found
+        raise InputError(f"invalid config {name}: field {field} = {value!r}: {detail}") from e
+
+
+def _failing_field(schema: type, data, path: str = "") -> tuple[str, object] | None:
+    """(dotted name, value) of the first field of `data` (found at `path`) that `schema` cannot
+    load, found by loading one field at a time with drake's loader, so the verdict is its own."""
+    from pydrake.common.yaml import yaml_load_typed
+    import yaml
+
+    if not isinstance(data, dict):
+        return (path, data) if path else None
+    types = typing.get_type_hints(schema)
+    for key, value in data.items():
+        if key not in types:
+            continue  # an unknown key fails with drake's own RuntimeError naming it
+        try:
+            yaml_load_typed(schema=schema, data=yaml.safe_dump({key: value}))
+        except _LOAD_ERRORS:
+            name = f"{path}.{key}" if path else str(key)
+            if dc.is_dataclass(types[key]):
+                return _failing_field(types[key], value, name) or (name, value)
+            return name, value
+    return None
+
+
+def _one_line(error: Exception) -> str:
+    return " ".join(str(error).split())

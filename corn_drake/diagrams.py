@@ -21,6 +21,7 @@ from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroO
 
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
+from corn_drake.errors import InputError
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
 from corn_drake.systems.energy_meter import add_energy_meter
@@ -57,7 +58,7 @@ def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
         from corn_drake.assets.library import load_object_spec
 
         return load_object_spec(cfg.library, cfg.object_id)
-    raise ValueError(f"object.kind must be box, cylinder or library, got {cfg.kind!r}")
+    raise InputError(f"scene.object.kind must be box, cylinder or library, got {cfg.kind!r}")
 
 
 def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:

@@ -11,3 +11,8 @@ from __future__ import annotations
 
 class InputError(ValueError):
     """Bad input from the user; the message must name the argument, field or file."""
+
+
+class MissingInputError(InputError, FileNotFoundError):
+    """A file or folder the user named does not exist. Also a FileNotFoundError, so callers that
+    catch that for a missing file keep working."""

@@ -1,4 +1,7 @@
-"""Atomic file writes: every data file and checkpoint goes through here (temp file + rename)."""
+"""Atomic file writes: every data file and checkpoint goes through here (temp file + rename).
+
+Also `read_json`, the reading side for JSON the user hands us, with errors that name the file.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +13,8 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+
+from corn_drake.errors import InputError, MissingInputError
 
 
 @contextmanager
@@ -52,3 +57,21 @@ def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.savez(f, **arrays)
+
+
+def read_json(path: str | os.PathLike, what: str) -> Any:
+    """The JSON in `path`. A missing, empty, binary or malformed file is an InputError naming
+    the file and `what` it should be (e.g. "object library manifest")."""
+    path = Path(path)
+    if not path.is_file():
+        raise MissingInputError(f"{what} {path}: file not found")
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise InputError(f"{what} {path}: not a UTF-8 text file") from None
+    if not text.strip():
+        raise InputError(f"{what} {path}: empty file")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise InputError(f"{what} {path}: not valid JSON ({e})") from None

@@ -7,7 +7,6 @@ to DIR; every file is written atomically, and a re-run skips objects already in 
 
 from __future__ import annotations
 
-import json
 import time
 import zlib
 from pathlib import Path
@@ -15,19 +14,19 @@ from pathlib import Path
 import numpy as np
 
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
-from corn_drake.assets.ingest import Rejected, find_mesh_files, load_watertight
+from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
+from corn_drake.assets.manifest import manifest_path, read_manifest, require_fields
 from corn_drake.assets.process import ProcessConfig, process_object
+from corn_drake.errors import InputError, MissingInputError
 from corn_drake.io_utils import write_json
 from corn_drake.scene.objects import ObjectSpec
 
 UNSEEN_EVERY = 8  # besides whole unseen families, 1 in 8 members of the others is unseen
 
 
-def read_manifest(library: str | Path) -> dict:
-    path = Path(library) / "manifest.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"object library {library}: no manifest.json")
-    return json.loads(path.read_text())
+# Manifest fields load_object_spec reads (ObjectSpec needs all of them to build the scene).
+SPEC_FIELDS = ("mass", "unit_inertia", "cloud", "stable_poses", "radius", "bbox_corners", "hulls",
+               "visual", "thin")
 
 
 def list_objects(library: str | Path, split: str | None = None) -> list[str]:
@@ -38,15 +37,32 @@ def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
     library = Path(library)
     entries = {o["id"]: o for o in read_manifest(library)["objects"]}
     if object_id not in entries:
-        raise KeyError(f"object {object_id!r} not in library {library}")
+        raise InputError(f"object {object_id!r} not in library {library}")
     e = entries[object_id]
+    require_fields(library, e, SPEC_FIELDS)
+
+    def array(key):
+        return _load_array(library, e, key)
+
     return ObjectSpec(name=object_id, mass=float(e["mass"]),
-                      unit_inertia=np.load(library / e["unit_inertia"]), com=np.zeros(3),
-                      cloud=np.load(library / e["cloud"]),
-                      stable_poses=np.load(library / e["stable_poses"]), radius=float(e["radius"]),
-                      bbox_corners=np.load(library / e["bbox_corners"]),
+                      unit_inertia=array("unit_inertia"), com=np.zeros(3),
+                      cloud=array("cloud"),
+                      stable_poses=array("stable_poses"), radius=float(e["radius"]),
+                      bbox_corners=array("bbox_corners"),
                       hull_paths=[library / h for h in e["hulls"]],
                       visual_path=library / e["visual"], thin=bool(e["thin"]))
+
+
+def _load_array(library: Path, entry: dict, key: str) -> np.ndarray:
+    path = library / entry[key]
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise MissingInputError(f"object {entry['id']!r} of {manifest_path(library)}: "
+                                f"{key} file not found: {path}") from None
+    except (OSError, ValueError, EOFError) as e:
+        raise InputError(f"object {entry['id']!r} of {manifest_path(library)}: cannot read "
+                         f"{key} file {path} ({e})") from None
 
 
 def _save(out: Path, manifest: dict) -> None:
@@ -54,9 +70,10 @@ def _save(out: Path, manifest: dict) -> None:
 
 
 def _load_or_new(out: Path) -> dict:
+    new = {"objects": [], "rejected": [], "timings": {}}
     if (out / "manifest.json").is_file():
-        return read_manifest(out)
-    return {"objects": [], "rejected": [], "timings": {}}
+        return {**new, **read_manifest(out)}  # the bookkeeping keys are optional on disk
+    return new
 
 
 def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
@@ -107,7 +124,11 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
 
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
     if not source.is_dir():
-        raise FileNotFoundError(f"mesh folder not found: {source}")
+        raise MissingInputError(f"mesh folder not found: {source}")
+    if not any(p.suffix.lower() in SUPPORTED for p in find_mesh_files(source)):
+        # Refuse before making `out`: an empty library would only fail later, elsewhere.
+        raise InputError(f"mesh folder {source}: no mesh files "
+                         f"({', '.join(sorted(SUPPORTED))}) in it")
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_or_new(out)
     done = {o["source"] for o in manifest["objects"]} | {r["source"] for r in manifest["rejected"]}

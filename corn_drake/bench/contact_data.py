@@ -11,14 +11,16 @@ import time
 
 import numpy as np
 
+from corn_drake.cli_types import positive_int
+
 NAME = "contact-data"
 HELP = "contact-data generation speed (samples/s) vs the plain numpy path"
 
 
 def add_arguments(parser):
     parser.add_argument("--objects", default="", help="object library (default: built-in primitives)")
-    parser.add_argument("--samples", type=int, default=16384)
-    parser.add_argument("--batch", type=int, default=4096)
+    parser.add_argument("--samples", type=positive_int, default=16384)
+    parser.add_argument("--batch", type=positive_int, default=4096)
 
 
 def _objects(path):

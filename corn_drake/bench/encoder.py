@@ -12,12 +12,15 @@ import json
 import subprocess
 import sys
 
+from corn_drake.cli_types import positive_int_list
+
 NAME = "encoder"
 HELP = "CORN encoder vs 3-layer PointNet: forward latency and peak memory per batch size"
 
 
 def add_arguments(parser):
-    parser.add_argument("--batches", default="1,64,1024,4096")
+    parser.add_argument("--batches", type=positive_int_list, default="1,64,1024,4096",
+                        help="comma-separated batch sizes")
 
 
 def _probe(kind: str, batch: int) -> dict:
@@ -31,7 +34,7 @@ def run(args) -> dict:
     from corn_drake.nn.pointnet import PointNetEncoder
 
     table = []
-    for batch in (int(b) for b in args.batches.split(",")):
+    for batch in args.batches:
         corn, pn = _probe("corn", batch), _probe("pointnet", batch)
         table.append({"batch": batch, "corn_ms": corn["latency_ms"], "pointnet_ms": pn["latency_ms"],
                       "speedup": pn["latency_ms"] / corn["latency_ms"],

@@ -14,15 +14,17 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from corn_drake.cli_types import positive_int
+
 NAME = "perception"
 HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stage breakdown"
 
 
 def add_arguments(parser):
     parser.add_argument("--config", default=None, help="student diagram YAML")
-    parser.add_argument("--frames", type=int, default=100)
-    parser.add_argument("--width", type=int, default=None, help="override camera width")
-    parser.add_argument("--height", type=int, default=None, help="override camera height")
+    parser.add_argument("--frames", type=positive_int, default=100)
+    parser.add_argument("--width", type=positive_int, default=None, help="override camera width")
+    parser.add_argument("--height", type=positive_int, default=None, help="override camera height")
     parser.add_argument("--mode", choices=["fixed", "tracking"], default=None)
     parser.add_argument("--segmentation", choices=["geometric", "ground_truth"], default=None)
 

@@ -22,18 +22,24 @@ import time
 
 import numpy as np
 
+from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.errors import InputError
+
 NAME = "sim"
 HELP = "TeacherEnv policy steps/s with random actions vs bare physics of the same plant"
 
 
 def add_arguments(parser):
-    parser.add_argument("--steps", type=int, default=600, help="policy steps per measurement")
+    parser.add_argument("--steps", type=positive_int, default=600,
+                        help="policy steps per measurement")
     parser.add_argument("--config", default=None, help="teacher diagram YAML (default: diagrams/teacher_rollout.yaml)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=nonnegative_int, default=0)
     parser.add_argument("--policy", default=None, choices=("corn", "e2e", "state", "pn"),
                         help="also measure with this policy (randomly initialised) in the loop")
-    parser.add_argument("--envs", type=int, default=8, help="envs in the policy-in-the-loop runs")
-    parser.add_argument("--workers", type=int, default=2, help="Ray workers in the Ray run")
+    parser.add_argument("--envs", type=positive_int, default=8,
+                        help="envs in the policy-in-the-loop runs")
+    parser.add_argument("--workers", type=positive_int, default=2,
+                        help="Ray workers in the Ray run")
 
 
 def _episodes(env, steps: int, seed: int):
@@ -171,9 +177,12 @@ def _policy_results(args, cfg) -> dict:
 def run(args) -> dict:
     from corn_drake.rl.env import TeacherEnv
 
+    if args.policy and args.envs < args.workers:
+        raise InputError(f"--envs {args.envs} < --workers {args.workers}: "
+                         "every Ray worker needs an env")
     env = TeacherEnv(args.config)
     if env.cfg.randomization.object_radius[1] > 0:
-        raise ValueError("bench sim replays torques on a fixed-size object; disable scale randomization")
+        raise InputError("bench sim replays torques on a fixed-size object; disable scale randomization")
     _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
     plans = _episodes(env, args.steps, args.seed)
     recorded = _record(env, plans)

@@ -15,6 +15,9 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from corn_drake.cli_types import positive_float
+from corn_drake.errors import InputError
+
 NAME = "tracking"
 HELP = "pose-tracking error (median / max per object) on scripted 10 s pushes"
 
@@ -35,7 +38,7 @@ def objects():
 def add_arguments(parser):
     parser.add_argument("--config", default=None, help="student diagram YAML (default: "
                         "diagrams/student_rollout.yaml)")
-    parser.add_argument("--duration", type=float, default=10.0, help="seconds per push")
+    parser.add_argument("--duration", type=positive_float, default=10.0, help="seconds per push")
     parser.add_argument("--objects", nargs="*", default=None, help="subset of object names")
 
 
@@ -89,4 +92,8 @@ def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = T
 
 
 def run(args) -> dict:
+    known = sorted(objects())
+    unknown = sorted(set(args.objects or ()) - set(known))
+    if unknown:  # else they would be skipped and the report would hold fewer objects, silently
+        raise InputError(f"--objects {' '.join(unknown)}: unknown; choose from {known}")
     return evaluate(args.config, args.duration, args.objects)

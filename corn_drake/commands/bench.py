@@ -32,7 +32,8 @@ def add_arguments(parser):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         p.add_argument("--report", required=True, help="path of the JSON report to write")
         module.add_arguments(p)
-        p.set_defaults(_bench_run=module.run, _bench_name=module.NAME)
+        # _prog: an input error is reported as `corn-drake bench NAME: error: ...`
+        p.set_defaults(_bench_run=module.run, _bench_name=module.NAME, _prog=p.prog)
 
 
 def run(args) -> int:

@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+from corn_drake.cli_types import nonnegative_int, positive_int
+
 NAME = "contact-data"
 HELP = "generate gripper-contact samples from an object library (sharded, resumable)"
 
 
 def add_arguments(parser):
     parser.add_argument("--objects", required=True, help="object library folder (manifest.json)")
-    parser.add_argument("--num-samples", type=int, required=True, help="training samples")
-    parser.add_argument("--eval-samples", type=int, default=None,
+    parser.add_argument("--num-samples", type=positive_int, required=True, help="training samples")
+    parser.add_argument("--eval-samples", type=positive_int, default=None,
                         help="samples for each of val / unseen (default: num-samples / 10)")
-    parser.add_argument("--shard-size", type=int, default=4096)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--shard-size", type=positive_int, default=4096)
+    parser.add_argument("--seed", type=nonnegative_int, default=0)
     parser.add_argument("--out", required=True)
     parser.add_argument("--no-progress", action="store_true")
 

@@ -6,8 +6,10 @@ killed) or, failing that, its metrics.json. Runs are labelled by their policy.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from corn_drake.errors import InputError, MissingInputError
+from corn_drake.io_utils import read_json
 
 NAME = "curves"
 HELP = "plot success rate and return of several training runs on one figure"
@@ -29,11 +31,12 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
         state = torch.load(checkpoint, map_location="cpu", weights_only=False)
         history = state["history"]
     elif metrics.is_file():
-        history = json.loads(metrics.read_text()).get("history")
-        if history is None:
-            raise ValueError(f"{metrics} has no 'history' (written before curves were kept)")
+        written = read_json(metrics, "training metrics")
+        history = written.get("history") if isinstance(written, dict) else None
+        if not isinstance(history, list):
+            raise InputError(f"{metrics} has no 'history' list (written before curves were kept?)")
     else:
-        raise FileNotFoundError(f"{run_dir}: no checkpoints/last.pt or metrics.json; is it a training run?")
+        raise MissingInputError(f"{run_dir}: no checkpoints/last.pt or metrics.json; is it a training run?")
     config = run_dir / "config.yaml"
     label = run_dir.name
     if config.is_file():

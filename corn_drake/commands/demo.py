@@ -13,19 +13,21 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from corn_drake.cli_types import nonnegative_int, positive_int
+
 NAME = "demo"
 HELP = "run the pipeline end to end at a small default size; prints where each output went"
 
 
 def add_arguments(parser):
     parser.add_argument("--out", default="runs/demo", help="output folder")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--objects", type=int, default=14, help="procedural objects")
-    parser.add_argument("--contact-samples", type=int, default=20_000)
-    parser.add_argument("--pretrain-steps", type=int, default=300)
-    parser.add_argument("--train-steps", type=int, default=4096, help="teacher env steps")
-    parser.add_argument("--eval-episodes", type=int, default=2)
-    parser.add_argument("--bench-steps", type=int, default=200)
+    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--objects", type=positive_int, default=14, help="procedural objects")
+    parser.add_argument("--contact-samples", type=positive_int, default=20_000)
+    parser.add_argument("--pretrain-steps", type=positive_int, default=300)
+    parser.add_argument("--train-steps", type=positive_int, default=4096, help="teacher env steps")
+    parser.add_argument("--eval-episodes", type=positive_int, default=2)
+    parser.add_argument("--bench-steps", type=positive_int, default=200)
 
 
 def _stage(name: str, outputs: dict, t0: float):

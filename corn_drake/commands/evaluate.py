@@ -13,6 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.errors import InputError
+
 NAME = "evaluate"
 HELP = "evaluate a trained teacher policy (success rate, per object) with Meshcat recordings"
 # Reference controllers `--run` accepts in place of a run folder (corn_drake/rl/scripted.py).
@@ -25,11 +28,12 @@ def add_arguments(parser):
                              "`scripted` (straight-line pusher) or `still` (zero action)")
     parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
     parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--record", type=int, default=1, help="episodes saved as Meshcat HTML")
+    parser.add_argument("--episodes", type=positive_int, default=10)
+    parser.add_argument("--record", type=nonnegative_int, default=1,
+                        help="episodes saved as Meshcat HTML")
     parser.add_argument("--config", default=None,
                         help="evaluation diagram YAML (default: diagrams/evaluation.yaml)")
-    parser.add_argument("--seed", type=int, default=1000)
+    parser.add_argument("--seed", type=nonnegative_int, default=1000)
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
     parser.add_argument("--report", required=True, help="JSON report path")
@@ -45,7 +49,7 @@ def _object_specs(args, cfg):
 
     ids = list_objects(args.objects, None if args.split == "all" else args.split)
     if not ids:
-        raise ValueError(f"no {args.split} objects in library {args.objects}")
+        raise InputError(f"no {args.split} objects in library {args.objects}")
     return [(i, load_object_spec(args.objects, i)) for i in ids]
 
 
@@ -92,7 +96,7 @@ def run(args) -> int:
     cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
     if args.run in REFERENCES:
         if args.stochastic:
-            raise ValueError(f"--stochastic samples a learned policy; --run {args.run} is a "
+            raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                              "deterministic reference controller")
         from corn_drake.rl import scripted
 

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+from corn_drake.cli_types import nonnegative_int, positive_int
+
 NAME = "objects"
 HELP = "build an object library: --source procedural, or --source PATH (OBJ/STL/PLY/GLB/OFF)"
 
 
 def add_arguments(parser):
     parser.add_argument("--source", default="procedural", help="'procedural' or a mesh folder")
-    parser.add_argument("--num", type=int, default=80, help="procedural objects")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--drops", type=int, default=128, help="drops per object for stable poses")
+    parser.add_argument("--num", type=positive_int, default=80, help="procedural objects")
+    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--drops", type=positive_int, default=128,
+                        help="drops per object for stable poses")
     parser.add_argument("--out", required=True)
     parser.add_argument("--no-progress", action="store_true")
 

@@ -13,6 +13,8 @@ import json
 import shutil
 from pathlib import Path
 
+from corn_drake.cli_types import nonnegative_int, positive_float, positive_int
+
 NAME = "pretrain"
 HELP = "pretrain the patch encoder on gripper contact (resumes from OUT/.../checkpoints/last.pt)"
 
@@ -21,24 +23,27 @@ def add_arguments(parser):
     parser.add_argument("--data", required=True, help="contact-data folder")
     parser.add_argument("--out", required=True, help="run folder, e.g. runs/pretrain")
     parser.add_argument("--model", choices=("corn", "pointnet", "both"), default="both")
-    parser.add_argument("--steps", type=int, default=2000)
-    parser.add_argument("--pointnet-steps", type=int, default=None,
+    parser.add_argument("--steps", type=positive_int, default=2000)
+    parser.add_argument("--pointnet-steps", type=positive_int, default=None,
                         help="PointNet steps (overrides --pointnet-budget)")
     parser.add_argument("--pointnet-budget", choices=("steps", "time"), default="steps",
                         help="with --model both: PointNet gets CORN's steps or CORN's wall-clock")
-    parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: config)")
-    parser.add_argument("--batch-size", type=int, default=1024)
-    parser.add_argument("--eval-every", type=int, default=250)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--lr", type=positive_float, default=None,
+                        help="peak learning rate (default: config)")
+    parser.add_argument("--batch-size", type=positive_int, default=1024)
+    parser.add_argument("--eval-every", type=positive_int, default=250)
+    parser.add_argument("--seed", type=nonnegative_int, default=0)
     parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args) -> int:
     from corn_drake.config import PretrainConfig
     from corn_drake.contact.pretrain import Pretrainer
+    from corn_drake.contact.shards import list_shards
     from corn_drake.io_utils import write_json, write_text
     from pydrake.common.yaml import yaml_dump_typed
 
+    list_shards(args.data, "train")  # a missing or empty dataset fails before OUT is touched
     out = Path(args.out)
     models = ["corn", "pointnet"] if args.model == "both" else [args.model]
     results = {}

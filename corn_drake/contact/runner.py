@@ -11,6 +11,7 @@ from corn_drake.contact.generate import ContactDataConfig, generate_samples, sha
 from corn_drake.contact.gripper_sdf import GripperSDF
 from corn_drake.contact.library_clouds import load_object_clouds
 from corn_drake.contact.shards import read_shard, shard_is_complete, shard_path, write_manifest, write_shard
+from corn_drake.errors import InputError
 
 
 def split_plan(num_samples: int, eval_samples: int, shard_size: int) -> dict[str, list[int]]:
@@ -33,7 +34,7 @@ def generate_dataset(objects_dir: str | Path, out: str | Path, num_samples: int,
              "unseen": [o for o in objects if o.split == "unseen"]}
     pools["val"] = pools["train"]
     if not pools["train"]:
-        raise ValueError(f"object library {objects_dir} has no train objects")
+        raise InputError(f"object library {objects_dir} has no train objects")
     eval_samples = eval_samples if eval_samples is not None else max(num_samples // 10, 256)
     plan = split_plan(num_samples, eval_samples if pools["unseen"] else 0, shard_size)
     if not pools["unseen"]:

@@ -7,13 +7,13 @@ and the seed. Every shard is a function of (seed, split, index) alone.
 
 from __future__ import annotations
 
-import json
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from corn_drake.io_utils import save_npz, write_json
+from corn_drake.errors import InputError, MissingInputError
+from corn_drake.io_utils import read_json, save_npz, write_json
 
 KEYS = {"points": 3, "labels": 2, "hand_pose": 2, "object_pose": 2, "object_id": 1, "scale": 1}
 
@@ -27,29 +27,29 @@ def write_shard(path: Path, arrays: dict) -> None:
 
 
 def read_shard(path: str | Path) -> dict[str, np.ndarray]:
-    """Loads and checks one shard; any problem is a ValueError naming the file."""
+    """Loads and checks one shard; any problem is an InputError (a ValueError) naming the file."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise ValueError(f"contact shard {path}: unreadable ({type(e).__name__}: {e})") from e
+        raise InputError(f"contact shard {path}: unreadable ({type(e).__name__}: {e})") from e
     missing = set(KEYS) - set(arrays)
     if missing:
-        raise ValueError(f"contact shard {path}: missing arrays {sorted(missing)}")
+        raise InputError(f"contact shard {path}: missing arrays {sorted(missing)}")
     n = len(arrays["points"])
     if n == 0:
-        raise ValueError(f"contact shard {path}: empty")
+        raise InputError(f"contact shard {path}: empty")
     for key, ndim in KEYS.items():
         if arrays[key].ndim != ndim or len(arrays[key]) != n:
-            raise ValueError(f"contact shard {path}: {key} has shape {arrays[key].shape}, "
+            raise InputError(f"contact shard {path}: {key} has shape {arrays[key].shape}, "
                              f"expected {ndim} dims with {n} samples")
     if arrays["points"].shape[2] != 3 or arrays["labels"].shape != arrays["points"].shape[:2]:
-        raise ValueError(f"contact shard {path}: points {arrays['points'].shape} and labels "
+        raise InputError(f"contact shard {path}: points {arrays['points'].shape} and labels "
                          f"{arrays['labels'].shape} do not match")
     for key in ("points", "hand_pose", "object_pose", "scale"):
         if not np.isfinite(arrays[key]).all():
-            raise ValueError(f"contact shard {path}: {key} has non-finite values")
+            raise InputError(f"contact shard {path}: {key} has non-finite values")
     return arrays
 
 
@@ -65,10 +65,10 @@ def shard_is_complete(path: Path, expected: int) -> bool:
 def list_shards(data: str | Path, split: str) -> list[Path]:
     data = Path(data)
     if not (data / "manifest.json").is_file():
-        raise FileNotFoundError(f"contact data {data}: no manifest.json")
+        raise MissingInputError(f"contact data {data}: no manifest.json")
     shards = sorted((data / split).glob("shard_*.npz"))
     if not shards:
-        raise ValueError(f"contact data {data}: no {split} shards")
+        raise InputError(f"contact data {data}: no {split} shards")
     return shards
 
 
@@ -82,4 +82,4 @@ def write_manifest(out: Path, info: dict) -> None:
 
 
 def read_manifest(data: str | Path) -> dict:
-    return json.loads((Path(data) / "manifest.json").read_text())
+    return read_json(Path(data) / "manifest.json", "contact data manifest")

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import torch
 from torch import nn
 
+from corn_drake.errors import InputError, MissingInputError
 from corn_drake.io_utils import atomic_path
 
 
@@ -31,13 +33,15 @@ def load_frozen_encoder(path: str | Path) -> nn.Module:
     """The encoder saved at `path`, in eval mode with gradients off."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"encoder checkpoint not found: {path}")
+        raise MissingInputError(f"encoder checkpoint not found: {path}")
     try:
         state = torch.load(path, weights_only=False)
         encoder = make_encoder(state["kind"])
         encoder.load_state_dict(state["state_dict"])
-    except (KeyError, RuntimeError, EOFError) as e:
-        raise ValueError(f"encoder checkpoint {path} is not a saved encoder ({e})") from e
+    # Garbage bytes fail in the unpickler, a truncated file in torch's zip reader, a checkpoint
+    # of something else on its keys or its kind.
+    except (KeyError, TypeError, ValueError, RuntimeError, EOFError, pickle.UnpicklingError) as e:
+        raise InputError(f"encoder checkpoint {path} is not a saved encoder ({e})") from e
     encoder.eval()
     for p in encoder.parameters():
         p.requires_grad_(False)

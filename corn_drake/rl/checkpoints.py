@@ -7,6 +7,7 @@ from pathlib import Path
 import torch
 
 from corn_drake.config import TrainConfig, load_config
+from corn_drake.errors import MissingInputError
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.encoders import load_encoder
 
@@ -16,7 +17,7 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     cfg = load_config(run_dir / "config.yaml", TrainConfig)
     ckpt = run_dir / "checkpoints" / "last.pt"
     if not ckpt.is_file():
-        raise FileNotFoundError(f"no checkpoint in {run_dir}: expected {ckpt}")
+        raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder))
     agent.load_state_dict(torch.load(ckpt, weights_only=False)["agent"])
     agent.eval()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from corn_drake.errors import InputError
 from corn_drake.nn.encoder_io import load_frozen_encoder
 from corn_drake.nn.encoder_io import make_encoder as make_fresh_encoder
 
@@ -17,12 +18,12 @@ def load_encoder(policy: str, checkpoint: str | Path | None):
     if policy == "e2e":
         return make_fresh_encoder("corn")
     if not checkpoint:
-        raise ValueError(f"policy {policy!r} needs --encoder CHECKPOINT (a pretrained encoder)")
+        raise InputError(f"policy {policy!r} needs --encoder CHECKPOINT (a pretrained encoder)")
     encoder = load_frozen_encoder(checkpoint)
     expected = ENCODER_KIND[policy]
     actual = "corn" if hasattr(encoder, "tokenizer") else "pointnet"
     if actual != expected:
-        raise ValueError(f"policy {policy!r} needs a {expected} encoder, {checkpoint} holds a {actual} one")
+        raise InputError(f"policy {policy!r} needs a {expected} encoder, {checkpoint} holds a {actual} one")
     return encoder
 
 

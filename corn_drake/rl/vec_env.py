@@ -16,6 +16,17 @@ import numpy as np
 from corn_drake.config import TeacherDiagramConfig
 
 
+def library_train_ids(library: str) -> list[str]:
+    """The train objects of an object library; none is an error (nothing to train on)."""
+    from corn_drake.assets.library import list_objects
+    from corn_drake.errors import InputError
+
+    ids = list_objects(library, "train")
+    if not ids:
+        raise InputError(f"object library {library} has no train objects")
+    return ids
+
+
 @dataclasses.dataclass
 class EnvFactory:
     """Picklable recipe for the envs of one batch: the config, and seeds derived from `seed`.
@@ -34,11 +45,7 @@ class EnvFactory:
         cfg.seed = self.seed + index
         obj = cfg.scene.object
         if obj.kind == "library" and not obj.object_id:
-            from corn_drake.assets.library import list_objects
-
-            ids = list_objects(obj.library, "train")
-            if not ids:
-                raise ValueError(f"object library {obj.library} has no train objects")
+            ids = library_train_ids(obj.library)
             obj.object_id = ids[index % len(ids)]
         return TeacherEnv(cfg)
 

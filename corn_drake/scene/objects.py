@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from corn_drake.errors import MissingInputError
+
 TABLE_TOP_Z = 0.4
 
 
@@ -40,7 +42,7 @@ class ObjectSpec:
             raise ValueError(f"object {self.name}: needs hull_paths or a primitive")
         for p in self.hull_paths:
             if not Path(p).is_file():
-                raise FileNotFoundError(f"object {self.name}: mesh file not found: {p}")
+                raise MissingInputError(f"object {self.name}: mesh file not found: {p}")
         if self.cloud.ndim != 2 or self.cloud.shape[1] != 6 or not np.isfinite(self.cloud).all():
             raise ValueError(f"object {self.name}: cloud must be finite (N, 6), got {self.cloud.shape}")
         # Empty is allowed (an object whose stable poses are being computed); envs need K > 0.

@@ -1,0 +1,283 @@
+"""Bad input to every subcommand: a non-zero exit, exactly one line on stderr naming the argument
+or file, no traceback, and nothing written or changed. Every row fails before any simulation or
+training starts (validation comes before the work), so the table runs in seconds in-process."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from corn_drake.cli import _command_modules, main
+from corn_drake.commands import bench
+from tests.fixtures import write_tiny_library
+
+REPO = Path(__file__).resolve().parents[1]
+
+# Object-library manifests that are broken in the ways a user meets: a binary file, an emptied
+# one, valid JSON of the wrong shape, an entry without its id.
+BROKEN_MANIFESTS = {
+    "lib_garbage": b"\xff\xfe\x00\x13\x8a garbage",
+    "lib_empty": b"",
+    "lib_no_objects": json.dumps({"rejected": []}).encode(),
+    "lib_no_id": json.dumps({"objects": [{"split": "train", "cloud": "c.npy", "radius": 0.1}]}).encode(),
+}
+BAD_TYPE_YAML = "task:\n  episode_steps: lots\n"
+# Item 14's other faces: each broken config is named with its field where it has one.
+BROKEN_CONFIGS = {
+    "bad_list.yaml": (b"scene:\n  object:\n    size: 3\n", "scene.object.size"),
+    "scalar_section.yaml": (b"task: 5\n", "field task"),
+    "bad_syntax.yaml": (b"task: [1, 2\n", "not valid YAML"),
+    "binary.yaml": (b"\xff\xfe\x00\x13", "not a UTF-8 text file"),
+    "unknown_key.yaml": (b"task:\n  episode_stepz: 3\n", "episode_stepz"),
+}
+
+
+def _row(argv: str, *names: str):
+    """One table row: the command line ({root} is the fixture folder) and what the error names."""
+    return pytest.param(argv.split(), names, id=argv.replace("{root}/", ""))
+
+
+OUT = "--out {root}/out"
+REPORT = "--report {root}/out/report.json"
+BENCH_REPORT = "--report {root}/out/bench.json"
+
+ROWS = [
+    # no command, an unknown one
+    _row("", "COMMAND"),
+    _row("nosuch", "nosuch"),
+    # objects (issue 18 items 6, 9, 12)
+    _row(f"objects --num 0 {OUT}", "--num"),
+    _row(f"objects --num -3 {OUT}", "--num"),
+    _row(f"objects --num many {OUT}", "--num"),
+    _row(f"objects --drops 0 {OUT}", "--drops"),
+    _row(f"objects --seed -1 {OUT}", "--seed"),
+    _row("objects --num 2", "--out"),
+    _row("objects --source {root}/empty_meshes --out {root}/new_lib", "{root}/empty_meshes"),
+    _row("objects --source {root}/nowhere --out {root}/new_lib", "{root}/nowhere"),
+    # contact-data (items 4, 12, 15)
+    _row(f"contact-data --objects {{root}}/lib --num-samples -5 {OUT}", "--num-samples"),
+    _row(f"contact-data --objects {{root}}/lib --num-samples 0 {OUT}", "--num-samples"),
+    _row(f"contact-data --objects {{root}}/lib --num-samples 8 --shard-size 0 {OUT}", "--shard-size"),
+    _row(f"contact-data --objects {{root}}/lib --num-samples 8 --eval-samples 0 {OUT}", "--eval-samples"),
+    _row(f"contact-data --objects {{root}}/lib --num-samples 8 --seed -2 {OUT}", "--seed"),
+    _row(f"contact-data --objects {{root}}/nowhere --num-samples 8 {OUT}", "{root}/nowhere"),
+    # pretrain (item 7)
+    _row(f"pretrain --data {{root}}/nowhere --steps 0 {OUT}", "--steps"),
+    _row(f"pretrain --data {{root}}/nowhere --batch-size 0 {OUT}", "--batch-size"),
+    _row(f"pretrain --data {{root}}/nowhere --eval-every 0 {OUT}", "--eval-every"),
+    _row(f"pretrain --data {{root}}/nowhere --pointnet-steps 0 {OUT}", "--pointnet-steps"),
+    _row(f"pretrain --data {{root}}/nowhere --lr 0 {OUT}", "--lr"),
+    _row(f"pretrain --data {{root}}/nowhere --lr nan {OUT}", "--lr"),
+    _row(f"pretrain --data {{root}}/nowhere {OUT}", "{root}/nowhere"),
+    # train (items 9, 14, 15)
+    _row(f"train --steps 0 {OUT}", "--steps"),
+    _row(f"train --steps -5 {OUT}", "--steps"),
+    _row(f"train --envs-per-worker 0 {OUT}", "--envs-per-worker"),
+    _row(f"train --rollout-steps 0 {OUT}", "--rollout-steps"),
+    _row(f"train --workers -1 {OUT}", "--workers"),
+    _row(f"train --minibatches 0 {OUT}", "--minibatches"),
+    _row(f"train --episode-steps 0 {OUT}", "--episode-steps"),
+    _row(f"train --init-log-std nan {OUT}", "--init-log-std"),
+    _row(f"train --policy bogus {OUT}", "--policy"),
+    _row(f"train --ppo lrr=1 {OUT}", "--ppo", "lrr"),
+    _row(f"train --config {{root}}/bad_type.yaml {OUT}", "{root}/bad_type.yaml", "task.episode_steps"),
+    _row(f"train --config {{root}}/nowhere.yaml {OUT}", "{root}/nowhere.yaml"),
+    _row(f"train --objects {{root}}/nowhere {OUT}", "{root}/nowhere"),
+    # evaluate (items 8, 14)
+    _row(f"evaluate --run scripted --episodes 0 {REPORT}", "--episodes"),
+    _row(f"evaluate --run scripted --record -1 {REPORT}", "--record"),
+    _row(f"evaluate --run scripted --seed -1 {REPORT}", "--seed"),
+    _row(f"evaluate --run scripted --stochastic {REPORT}", "--stochastic"),
+    _row(f"evaluate --run {{root}}/nowhere {REPORT}", "{root}/nowhere/config.yaml"),
+    _row(f"evaluate --run scripted --config {{root}}/bad_type.yaml {REPORT}",
+         "{root}/bad_type.yaml", "task.episode_steps"),
+    # the tiny library holds clouds only: evaluate needs each object's full scene description
+    _row(f"evaluate --run scripted --objects {{root}}/lib --split all {REPORT}",
+         "{root}/lib/manifest.json", "unit_inertia"),
+    # curves
+    _row("curves --run {root}/nowhere --out {root}/out/c.png", "{root}/nowhere"),
+    _row("curves --run {root}/run_garbage_metrics --out {root}/out/c.png",
+         "{root}/run_garbage_metrics/metrics.json"),
+    _row("curves --run {root}/run_no_history --out {root}/out/c.png", "{root}/run_no_history/metrics.json"),
+    _row("curves --run {root}/run_no_history", "--out"),
+    # bench
+    _row("bench", "WHAT"),
+    _row("bench sim --steps 10", "--report"),
+    _row(f"bench sim {BENCH_REPORT} --steps 0", "--steps"),
+    _row(f"bench sim {BENCH_REPORT} --envs 0", "--envs"),
+    _row(f"bench sim {BENCH_REPORT} --workers 0", "--workers"),
+    _row(f"bench sim {BENCH_REPORT} --policy state --envs 1 --workers 2", "--envs"),
+    _row(f"bench sim {BENCH_REPORT} --config {{root}}/bad_type.yaml", "{root}/bad_type.yaml"),
+    _row(f"bench contact-data {BENCH_REPORT} --samples 0", "--samples"),
+    _row(f"bench contact-data {BENCH_REPORT} --batch -1", "--batch"),
+    _row(f"bench contact-data {BENCH_REPORT} --objects {{root}}/lib_no_id", "{root}/lib_no_id/manifest.json"),
+    _row(f"bench encoder {BENCH_REPORT} --batches 1,x", "--batches"),
+    _row(f"bench encoder {BENCH_REPORT} --batches 64,0", "--batches"),
+    _row(f"bench perception {BENCH_REPORT} --frames 0", "--frames"),
+    _row(f"bench perception {BENCH_REPORT} --width 0", "--width"),
+    _row(f"bench tracking {BENCH_REPORT} --duration 0", "--duration"),
+    _row(f"bench tracking {BENCH_REPORT} --objects nosuch_box", "nosuch_box"),
+    # demo
+    _row("demo --out {root}/demo --objects 0", "--objects"),
+    _row("demo --out {root}/demo --contact-samples 0", "--contact-samples"),
+    _row("demo --out {root}/demo --pretrain-steps 0", "--pretrain-steps"),
+    _row("demo --out {root}/demo --train-steps -1", "--train-steps"),
+    _row("demo --out {root}/demo --eval-episodes 0", "--eval-episodes"),
+    _row("demo --out {root}/demo --bench-steps 0", "--bench-steps"),
+    _row("demo --out {root}/demo --seed -1", "--seed"),
+]
+
+ROWS += [_row(f"train --config {{root}}/{name} {OUT}", "{root}/" + name, detail)
+         for name, (_, detail) in BROKEN_CONFIGS.items()]
+
+# Item 12: every command that reads an object library names the broken manifest.
+LIBRARY_READERS = ["objects --num 1 --out LIB", f"contact-data --objects LIB --num-samples 8 {OUT}",
+                   f"train --objects LIB {OUT}", f"evaluate --run scripted --objects LIB {REPORT}"]
+ROWS += [_row(argv.replace("LIB", "{root}/" + lib), "{root}/" + lib + "/manifest.json")
+         for argv in LIBRARY_READERS for lib in BROKEN_MANIFESTS]
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory) -> Path:
+    """Inputs for the rows, plus pre-existing outputs that a failed command must leave alone."""
+    root = tmp_path_factory.mktemp("bad_input")
+    write_tiny_library(root / "lib")
+    for name, content in BROKEN_MANIFESTS.items():
+        (root / name).mkdir()
+        (root / name / "manifest.json").write_bytes(content)
+    (root / "empty_meshes").mkdir()
+    (root / "bad_type.yaml").write_text(BAD_TYPE_YAML)
+    for name, (content, _) in BROKEN_CONFIGS.items():
+        (root / name).write_bytes(content)
+    (root / "run_garbage_metrics").mkdir()
+    (root / "run_garbage_metrics" / "metrics.json").write_text('{"history": [')
+    (root / "run_no_history").mkdir()
+    (root / "run_no_history" / "metrics.json").write_text('{"global_step": 64}')
+    (root / "out").mkdir()
+    for name in ("report.json", "bench.json", "c.png", "metrics.json"):
+        (root / "out" / name).write_text(f"previous {name}\n")
+    return root
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every file and folder under `root`, files by content hash."""
+    return {str(p.relative_to(root)): "dir" if p.is_dir() else hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*"))}
+
+
+def prog_of(argv: list[str]) -> str:
+    """`corn-drake [COMMAND [BENCHMARK]]`: who the error line says failed."""
+    words = ["corn-drake"]
+    if argv and argv[0] in {m.NAME for m in _command_modules()}:
+        words.append(argv[0])
+        if argv[0] == "bench" and len(argv) > 1 and argv[1] in {m.NAME for m in bench._bench_modules()}:
+            words.append(argv[1])
+    return " ".join(words)
+
+
+def run_cli(argv: list[str]) -> int:
+    try:
+        return main(argv)
+    except SystemExit as e:  # argparse's errors exit
+        return e.code
+
+
+@pytest.mark.parametrize("argv, names", ROWS)
+def test_bad_input_is_one_line_naming_it(root, capsys, monkeypatch, argv, names):
+    monkeypatch.delenv("CORN_DRAKE_DEBUG", raising=False)
+    argv = [a.format(root=root) for a in argv]
+    before = snapshot(root)
+    code = run_cli(argv)
+    err = capsys.readouterr().err
+    assert code not in (0, None), f"exit {code} for {argv}"
+    assert "Traceback" not in err
+    assert len(err.splitlines()) == 1, f"expected one line on stderr, got:\n{err}"
+    assert err.startswith(f"{prog_of(argv)}: error: "), err
+    for name in names:
+        assert name.format(root=root) in err, f"{name!r} not named in: {err}"
+    assert snapshot(root) == before, "a failed command changed or wrote files"
+
+
+def test_every_subcommand_has_rows():
+    """A new subcommand (or benchmark) must come with its bad-input rows."""
+    commands = {m.NAME for m in _command_modules()}
+    benches = {m.NAME for m in bench._bench_modules()}
+    covered = {p.values[0][0] for p in ROWS if p.values[0]}
+    covered_benches = {p.values[0][1] for p in ROWS if p.values[0][:1] == ["bench"] and len(p.values[0]) > 1}
+    assert commands <= covered, f"no rows for {sorted(commands - covered)}"
+    assert benches <= covered_benches, f"no rows for bench {sorted(benches - covered_benches)}"
+
+
+def test_debug_flag_keeps_the_traceback(root, monkeypatch):
+    from corn_drake.errors import InputError
+
+    monkeypatch.delenv("CORN_DRAKE_DEBUG", raising=False)
+    with pytest.raises(InputError, match="lib_garbage"):
+        main(["--debug", "contact-data", "--objects", str(root / "lib_garbage"), "--num-samples", "8",
+              "--out", str(root / "out")])
+
+
+def test_the_installed_entry_point_behaves_the_same(root):
+    """The real process: exit status 2 and one line, for an argparse error and an input error."""
+    paths = [str(REPO), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}  # this checkout's code, not another
+    env.pop("CORN_DRAKE_DEBUG", None)
+    before = snapshot(root)
+    for argv, name in ((["train", "--steps", "0", "--out", str(root / "out")], "--steps"),
+                       (["contact-data", "--objects", str(root / "lib_garbage"), "--num-samples", "8",
+                         "--out", str(root / "out")], str(root / "lib_garbage" / "manifest.json"))):
+        proc = subprocess.run([sys.executable, "-m", "corn_drake.cli", *argv], env=env, cwd=root,
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert len(proc.stderr.splitlines()) == 1 and name in proc.stderr, proc.stderr
+    assert snapshot(root) == before
+
+
+def test_library_object_files_are_named(tmp_path):
+    """An object whose manifest entry is complete but whose arrays are gone or corrupt."""
+    from corn_drake.assets.library import SPEC_FIELDS, load_object_spec
+    from corn_drake.errors import InputError
+
+    entry = {"id": "box", "split": "train", "mass": 0.2, "radius": 0.05, "thin": False, "hulls": [],
+             "visual": "box.obj", **{k: f"box_{k}.npy" for k in ("unit_inertia", "cloud",
+                                                                    "stable_poses", "bbox_corners")}}
+    assert set(entry) >= set(SPEC_FIELDS)
+    (tmp_path / "manifest.json").write_text(json.dumps({"objects": [entry]}))
+    with pytest.raises(FileNotFoundError, match="box_unit_inertia.npy") as missing:
+        load_object_spec(tmp_path, "box")
+    assert isinstance(missing.value, InputError)
+    (tmp_path / "box_unit_inertia.npy").write_bytes(b"not an array")
+    with pytest.raises(InputError, match="box_unit_inertia.npy"):
+        load_object_spec(tmp_path, "box")
+    with pytest.raises(InputError, match="'nosuch' not in library"):
+        load_object_spec(tmp_path, "nosuch")
+
+
+def test_garbage_encoder_checkpoint_is_named(tmp_path):
+    from corn_drake.errors import InputError
+    from corn_drake.nn.encoder_io import load_frozen_encoder
+
+    bad = tmp_path / "enc.pt"
+    bad.write_bytes(b"\x80\x02garbage that is no pickle")
+    with pytest.raises(InputError, match="enc.pt"):
+        load_frozen_encoder(bad)
+
+
+def test_ingest_resumes_a_manifest_without_bookkeeping_keys(tmp_path):
+    """A hand-written manifest may hold only "objects"; ingesting more must not KeyError."""
+    from corn_drake.assets.library import ingest_folder
+
+    source, out = tmp_path / "meshes", tmp_path / "lib"
+    source.mkdir()
+    out.mkdir()
+    (source / "broken.obj").write_text("this is no mesh\n")
+    (out / "manifest.json").write_text(json.dumps({"objects": []}))
+    manifest = ingest_folder(source, out, progress=False)
+    assert [r["source"] for r in manifest["rejected"]] == ["broken.obj"]
+    assert json.loads((out / "manifest.json").read_text())["rejected"] == manifest["rejected"]
