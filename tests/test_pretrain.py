@@ -88,3 +88,58 @@ def test_bad_encoder_checkpoint_is_named(tmp_path):
     torch.save({"nothing": 1}, bad)
     with pytest.raises(ValueError, match="enc.pt"):
         load_frozen_encoder(bad)
+
+
+def _pretrain_args(data, out, steps=60):
+    return ["pretrain", "--data", str(data), "--out", str(out), "--model", "corn", "--steps",
+            str(steps), "--batch-size", "8", "--eval-every", "10", "--no-progress"]
+
+
+def test_pretraining_stopped_and_resumed_matches_an_uninterrupted_run_bitwise(data, tmp_path):
+    """8 steps straight == 4 steps + resume to 8, bit for bit: the resume restores every RNG
+    stream (dropout draws from torch's global one, which a new Pretrainer reseeds, as a new
+    process would). The first 4 steps are all warm-up, whose learning rate does not depend on
+    the step budget, so stopping the first run by its budget is a clean interruption."""
+    def cfg(steps):
+        return PretrainConfig(model="corn", steps=steps, batch_size=4, warmup_steps=4,
+                              eval_every=100, checkpoint_every=100, eval_samples=16)
+
+    Pretrainer(cfg(8), data, tmp_path / "straight").train(progress=False)
+    Pretrainer(cfg(4), data, tmp_path / "resumed").train(progress=False)
+    resumed = Pretrainer(cfg(8), data, tmp_path / "resumed")
+    assert resumed.step == 4
+    resumed.train(progress=False)
+    a = torch.load(tmp_path / "straight" / "checkpoints" / "last.pt", weights_only=False)["model"]
+    b = torch.load(tmp_path / "resumed" / "checkpoints" / "last.pt", weights_only=False)["model"]
+    assert a.keys() == b.keys()
+    for name in a:
+        assert torch.equal(a[name], b[name]), f"{name} drifted after the resume"
+
+
+def test_corrupt_pretraining_checkpoint_falls_back_to_the_previous_then_is_named(
+        data, tmp_path, capsys):
+    from corn_drake.cli import main
+    from corn_drake.errors import InputError
+
+    cfg = PretrainConfig(model="corn", steps=3, batch_size=8, warmup_steps=1, eval_every=2,
+                         checkpoint_every=2, eval_samples=64)
+    Pretrainer(cfg, data, tmp_path).train(progress=False)  # checkpoints at steps 2 and 3
+    last = tmp_path / "checkpoints" / "last.pt"
+    prev = last.with_name("prev.pt")
+    with open(last, "r+b") as f:
+        f.truncate(1000)
+    capsys.readouterr()
+    assert Pretrainer(cfg, data, tmp_path).step == 2
+    err = capsys.readouterr().err
+    assert "warning" in err and str(last) in err and str(prev) in err
+    prev.write_bytes(b"garbage")
+    with pytest.raises(InputError, match="prev.pt"):
+        Pretrainer(cfg, data, tmp_path)
+    # The command says it in one line (its run folder is OUT/corn).
+    out = tmp_path / "cli"
+    (out / "corn" / "checkpoints").mkdir(parents=True)
+    for name in ("last.pt", "prev.pt"):
+        (out / "corn" / "checkpoints" / name).write_bytes(b"garbage")
+    assert main(_pretrain_args(data, out, steps=3)) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "last.pt" in err and "Traceback" not in err

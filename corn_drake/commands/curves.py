@@ -25,10 +25,10 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
     """(label, history rows) of one training run; a clear error when it has neither file."""
     checkpoint = run_dir / "checkpoints" / "last.pt"
     metrics = run_dir / "metrics.json"
-    if checkpoint.is_file():
-        import torch
+    from corn_drake.io_utils import load_checkpoint
 
-        state = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    state = load_checkpoint(checkpoint, required=("history",))  # prev.pt if last.pt is unreadable
+    if state is not None:
         history = state["history"]
     elif metrics.is_file():
         written = read_json(metrics, "training metrics")

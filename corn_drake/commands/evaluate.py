@@ -1,8 +1,9 @@
 """`corn-drake evaluate`: success of a trained teacher in the evaluation diagram.
 
 The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
-(the config's object, or a library's objects of one split); K of them are recorded to Meshcat
-HTML next to the report.
+(the run's object, or the --split objects of a library: --objects, else the one the run was
+trained on with `train --objects`); K of them are recorded to Meshcat HTML next to the report.
+The report's folder (and the recordings') are checked writable before the first episode.
 """
 
 from __future__ import annotations
@@ -39,18 +40,26 @@ def add_arguments(parser):
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
+def _whole_library(obj) -> str:
+    """The library of an object config that names a whole library (object_id ""), as
+    `train --objects` records it; "" for a single object."""
+    return obj.library if obj.kind == "library" and not obj.object_id else ""
+
+
 def _object_specs(args, cfg):
-    if not args.objects:
+    # --objects, else the run's library when it was trained on a whole one: its --split objects.
+    library = args.objects or _whole_library(cfg.scene.object)
+    if not library:
         from corn_drake.diagrams import object_spec_from_config
 
         return [(cfg.scene.object.object_id or cfg.scene.object.kind,
                  object_spec_from_config(cfg.scene.object, cfg.seed))]
     from corn_drake.assets.library import list_objects, load_object_spec
 
-    ids = list_objects(args.objects, None if args.split == "all" else args.split)
+    ids = list_objects(library, None if args.split == "all" else args.split)
     if not ids:
-        raise InputError(f"no {args.split} objects in library {args.objects}")
-    return [(i, load_object_spec(args.objects, i)) for i in ids]
+        raise InputError(f"no {args.split} objects in library {library}")
+    return [(i, load_object_spec(library, i)) for i in ids]
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path) -> dict:
@@ -90,9 +99,18 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
 def run(args) -> int:
     from corn_drake.config import TeacherDiagramConfig, load_config
     from corn_drake import DIAGRAMS_DIR
-    from corn_drake.io_utils import write_json
+    from corn_drake.errors import InputError
+    from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
 
+    report_path = Path(args.report)
+    out_dir = report_path.parent / f"{report_path.stem}_recordings"
+    # Before any episode: a destination that cannot be written would lose all of them.
+    if report_path.is_dir():
+        raise InputError(f"--report {report_path}: is a folder; give the report file's path")
+    ensure_writable(report_path.parent, "--report")
+    if args.record > 0:
+        ensure_writable(out_dir, "--record")
     cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
     if args.run in REFERENCES:
         if args.stochastic:
@@ -110,8 +128,6 @@ def run(args) -> int:
 
             agent.action_noise = torch.Generator().manual_seed(args.seed)
         cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
-    report_path = Path(args.report)
-    out_dir = report_path.parent / f"{report_path.stem}_recordings"
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
     report.update({"run": str(args.run), "policy": policy, "split": args.split,

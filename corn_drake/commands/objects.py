@@ -1,4 +1,9 @@
-"""`corn-drake objects`: build an object library (procedural families or a folder of meshes)."""
+"""`corn-drake objects`: build an object library (procedural families or a folder of meshes).
+
+OUT is locked while the command runs. Building into an existing library resumes it only with the
+--source, --seed and --drops it was made with (recorded in OUT/arguments.json; libraries made
+before the record was kept are not checked); a procedural --num may grow, adding objects.
+"""
 
 from __future__ import annotations
 
@@ -18,16 +23,33 @@ def add_arguments(parser):
     parser.add_argument("--no-progress", action="store_true")
 
 
+def output_arguments(args) -> dict:
+    """The arguments that define the library's objects (each a function of the seed and its
+    index or file). --num is one only for procedural libraries, and may grow: a resume with a
+    larger --num adds objects to the same library."""
+    import os
+
+    procedural = args.source == "procedural"
+    recorded = {"--source": args.source if procedural else os.path.normpath(args.source),
+                "--seed": args.seed, "--drops": args.drops}
+    if procedural:
+        recorded["--num"] = args.num
+    return recorded
+
+
 def run(args) -> int:
     from corn_drake.assets.library import build_procedural, ingest_folder
     from corn_drake.assets.process import ProcessConfig
+    from corn_drake.run_folder import lock_folder, resume_arguments
 
     cfg = ProcessConfig()
     cfg.drops.drops = args.drops
-    if args.source == "procedural":
-        manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
-    else:
-        manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
+    with lock_folder(args.out):
+        resume_arguments(args.out, output_arguments(args), may_grow=("--num",))
+        if args.source == "procedural":
+            manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
+        else:
+            manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
     splits = [o["split"] for o in manifest["objects"]]
     print(f"{splits.count('train')} train + {splits.count('unseen')} unseen objects, "
           f"{len(manifest['rejected'])} rejected; manifest {args.out}/manifest.json")

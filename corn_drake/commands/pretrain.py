@@ -5,11 +5,13 @@ OUT/pointnet, for the same number of steps (--pointnet-budget steps) or the same
 wall-clock (--pointnet-budget time: CORN's recorded train_seconds divided by PointNet's measured
 seconds per step; PointNet is ~20x slower per step on a CPU, so equal steps do not fit a session); OUT/metrics.json holds CORN's metrics with PointNet's under
 "pointnet", and OUT/encoder.pt is the frozen CORN encoder for `corn-drake train --policy corn`.
+OUT is locked while the command runs; resuming refuses changed arguments (see RESUME_MAY_GROW).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -37,14 +39,23 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from corn_drake.config import PretrainConfig
-    from corn_drake.contact.pretrain import Pretrainer
     from corn_drake.contact.shards import list_shards
-    from corn_drake.io_utils import write_json, write_text
-    from pydrake.common.yaml import yaml_dump_typed
+    from corn_drake.run_folder import lock_folder, resume_arguments
 
     list_shards(args.data, "train")  # a missing or empty dataset fails before OUT is touched
     out = Path(args.out)
+    with lock_folder(out):
+        resume_arguments(out, {"--data": os.path.normpath(args.data)})
+        return _pretrain(args, out)
+
+
+def _pretrain(args, out: Path) -> int:
+    from corn_drake.config import PretrainConfig
+    from corn_drake.contact.pretrain import Pretrainer
+    from corn_drake.io_utils import write_json, write_text
+    from corn_drake.run_folder import refuse_changed_config
+    from pydrake.common.yaml import yaml_dump_typed
+
     models = ["corn", "pointnet"] if args.model == "both" else [args.model]
     results = {}
     budget = {"kind": "steps"}
@@ -72,9 +83,13 @@ def run(args) -> int:
                              warmup_steps=min(100, max(steps // 10, 1)), eval_every=args.eval_every,
                              checkpoint_every=args.eval_every, seed=args.seed)
         run_dir = out / model
+        # Refusals (other arguments, an unreadable checkpoint) come before the first write.
+        refuse_changed_config(run_dir, run_dir / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
+                              ignore=RESUME_MAY_CHANGE, name=argument_of_field)
+        pretrainer = Pretrainer(cfg, args.data, run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
         write_text(run_dir / "config.yaml", yaml_dump_typed(cfg))
-        results[model] = Pretrainer(cfg, args.data, run_dir).train(progress=not args.no_progress)
+        results[model] = pretrainer.train(progress=not args.no_progress)
         print(f"{model}: unseen patch accuracy {results[model].get('unseen_patch_accuracy', float('nan')):.3f}, "
               f"F1 {results[model].get('unseen_patch_f1', float('nan')):.3f}")
     merged_path = out / "metrics.json"
@@ -87,3 +102,18 @@ def run(args) -> int:
     write_json(merged_path, merged)
     print(f"wrote {merged_path}")
     return 0
+
+
+# A resumed model (OUT/MODEL holds config.yaml) must be given the arguments it started with,
+# except: --steps / --pointnet-steps may grow (warmup_steps follows from them); --eval-every
+# (eval_every, checkpoint_every) and --no-progress may change. --data is recorded in
+# OUT/arguments.json.
+RESUME_MAY_GROW = ("steps",)
+RESUME_MAY_CHANGE = ("warmup_steps", "eval_every", "checkpoint_every")
+_FIELD_ARGUMENTS = {"model": "--model", "steps": "--steps (or --pointnet-steps)",
+                    "batch_size": "--batch-size", "lr": "--lr", "seed": "--seed"}
+
+
+def argument_of_field(field: str) -> str:
+    """The pretrain argument behind a PretrainConfig field, for refusal messages."""
+    return _FIELD_ARGUMENTS.get(field, f"PretrainConfig.{field}")

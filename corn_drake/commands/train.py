@@ -1,4 +1,10 @@
-"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/trainer.py)."""
+"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/trainer.py).
+
+OUT is locked while the command runs (a second `train` into it refuses). Training into an
+existing run resumes it, and only with the arguments it was started with (compared with its
+config.yaml, before anything is written): --steps may grow, --ray-address and --no-progress
+may change; any other difference is refused, naming the argument and both values.
+"""
 
 from __future__ import annotations
 
@@ -40,6 +46,7 @@ def run(args) -> int:
     from corn_drake.rl.encoders import load_encoder
     from corn_drake.config import TrainConfig
     from corn_drake.rl.trainer import Trainer, save_config
+    from corn_drake.run_folder import lock_folder, refuse_changed_config
 
     env_cfg = load_teacher_config(args.config)
     if args.episode_steps:
@@ -59,12 +66,43 @@ def run(args) -> int:
     cfg.ppo.minibatches = args.minibatches
     cfg.ppo = ppo_overrides(cfg.ppo, args.ppo)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    save_config(cfg, out / "config.yaml")
-    encoder = load_encoder(cfg.policy, cfg.encoder)
-    metrics = Trainer(cfg, out, encoder).train(progress=not args.no_progress)
+    with lock_folder(out):
+        # Everything that can refuse comes before the first write: a refused resume leaves the
+        # run as it was (its config.yaml is what `evaluate` rebuilds the policy from).
+        refuse_changed_config(out, out / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
+                              ignore=RESUME_MAY_CHANGE, name=argument_of_field)
+        encoder = load_encoder(cfg.policy, cfg.encoder)
+        trainer = Trainer(cfg, out, encoder)  # reads (and checks) the checkpoint, writes nothing
+        save_config(cfg, out / "config.yaml")
+        metrics = trainer.train(progress=not args.no_progress)
     print(f"trained {metrics['global_step']} steps; run folder {out}")
     return 0
+
+
+# A resumed run (OUT holds config.yaml) must be given the arguments it was started with, except
+# these config fields: --steps may grow (extends the run); --ray-address only says where the
+# workers run; checkpoint_every is not an output. --no-progress is not in the config at all.
+RESUME_MAY_GROW = ("total_steps",)
+RESUME_MAY_CHANGE = ("ray_address", "checkpoint_every")
+# The argument that sets each config field, to name it when a resume differs.
+_FIELD_ARGUMENTS = {"policy": "--policy", "total_steps": "--steps", "workers": "--workers",
+                    "envs_per_worker": "--envs-per-worker", "rollout_steps": "--rollout-steps",
+                    "seed": "--seed", "encoder": "--encoder", "init_log_std": "--init-log-std",
+                    "ppo.minibatches": "--minibatches",
+                    "env.task.episode_steps": "--episode-steps (or --config task.episode_steps)"}
+
+
+def argument_of_field(field: str) -> str:
+    """The train argument behind a TrainConfig field ('a.b.c'), for refusal messages."""
+    if field in _FIELD_ARGUMENTS:
+        return _FIELD_ARGUMENTS[field]
+    if field.startswith("env.scene.object."):
+        return f"--objects (or --config scene.object.{field.rsplit('.', 1)[1]})"
+    if field.startswith("ppo."):
+        return f"--ppo {field[4:]}"
+    if field.startswith("env."):
+        return f"--config ({field[4:]})"
+    return field
 
 
 def ppo_overrides(ppo, items: list[str]):

@@ -4,12 +4,14 @@ The CORN model predicts, per patch (16 FPS centres x 32 sorted neighbours), whet
 touches it; a patch is positive if any of its points is inside the gripper. The PointNet baseline
 predicts per point; its patch predictions are the max over the same patches, so both get the
 same patch-level metrics. Run folder: config.yaml, checkpoints/last.pt (atomic, resumable to the
-same step), tb/, metrics.json, plots/predictions.png, encoder.pt (frozen-encoder export).
+same step with every RNG's state; the one before kept as prev.pt, used if last.pt is unreadable),
+tb/, metrics.json, plots/predictions.png, encoder.pt (frozen-encoder export).
 """
 
 from __future__ import annotations
 
 import math
+import random
 import time
 from pathlib import Path
 
@@ -19,7 +21,8 @@ from torch import nn
 
 from corn_drake.config import PretrainConfig
 from corn_drake.contact.shards import load_split
-from corn_drake.io_utils import atomic_path, write_json
+from corn_drake.errors import InputError
+from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.encoder import CORNContactModel
 from corn_drake.nn.encoder_io import save_encoder
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
@@ -29,6 +32,24 @@ from corn_drake.nn.pointnet import PointNetContactModel
 
 CENTER = torch.tensor([0.0, 0.0, 0.55])
 SCALE = 0.4
+
+
+def _global_rng_state() -> dict:
+    """Every global RNG a training step may draw from (dropout uses torch's), so a resumed run
+    continues the same random stream as an uninterrupted one."""
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(),
+             "python": random.getstate()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_global_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
 
 
 def hand9(hand_pose: torch.Tensor) -> torch.Tensor:
@@ -79,13 +100,7 @@ class Pretrainer:
         self.train_set = {k: torch.from_numpy(v) for k, v in load_split(self.data, "train").items()
                           if k in ("points", "labels", "hand_pose")}
         self.checkpoint = self.out / "checkpoints" / "last.pt"
-        if self.checkpoint.exists():
-            state = torch.load(self.checkpoint, weights_only=False)
-            self.model.load_state_dict(state["model"])
-            self.optimizer.load_state_dict(state["optimizer"])
-            self.generator.set_state(state["generator"])
-            self.step, self.history = state["step"], state["history"]
-            self.train_seconds = state.get("train_seconds", 0.0)
+        self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
 
     def lr_at(self, step: int) -> float:
         c = self.cfg
@@ -108,11 +123,26 @@ class Pretrainer:
 
     def _save(self):
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
-                 "generator": self.generator.get_state(), "step": self.step,
-                 "history": self.history, "model_kind": self.cfg.model,
+                 "generator": self.generator.get_state(), "rng": _global_rng_state(),
+                 "step": self.step, "history": self.history, "model_kind": self.cfg.model,
                  "train_seconds": self.train_seconds}
-        with atomic_path(self.checkpoint) as tmp:
-            torch.save(state, tmp)
+        save_checkpoint(self.checkpoint, state)
+
+    def _load(self):
+        state = load_checkpoint(self.checkpoint, required=("model", "optimizer", "generator",
+                                                           "step", "history"))
+        if state is None:
+            return
+        kind = state.get("model_kind", self.cfg.model)
+        if kind != self.cfg.model:
+            raise InputError(f"{self.checkpoint} holds a {kind!r} model, not {self.cfg.model!r}")
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.generator.set_state(state["generator"])
+        if "rng" in state:  # absent in checkpoints written before it was kept
+            _set_global_rng_state(state["rng"])
+        self.step, self.history = state["step"], state["history"]
+        self.train_seconds = state.get("train_seconds", 0.0)
 
     @torch.no_grad()
     def evaluate(self, split: str) -> dict:

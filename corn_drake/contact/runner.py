@@ -23,6 +23,12 @@ def split_plan(num_samples: int, eval_samples: int, shard_size: int) -> dict[str
     return {"train": sizes(num_samples), "val": sizes(eval_samples), "unseen": sizes(eval_samples)}
 
 
+def effective_eval_samples(num_samples: int, eval_samples: int | None) -> int:
+    """Samples in each of val / unseen: `eval_samples`, or by default a tenth of the training
+    samples (at least 256)."""
+    return eval_samples if eval_samples is not None else max(num_samples // 10, 256)
+
+
 def generate_dataset(objects_dir: str | Path, out: str | Path, num_samples: int, seed: int,
                      eval_samples: int | None = None, shard_size: int = 4096,
                      progress: bool = True) -> dict:
@@ -35,7 +41,7 @@ def generate_dataset(objects_dir: str | Path, out: str | Path, num_samples: int,
     pools["val"] = pools["train"]
     if not pools["train"]:
         raise InputError(f"object library {objects_dir} has no train objects")
-    eval_samples = eval_samples if eval_samples is not None else max(num_samples // 10, 256)
+    eval_samples = effective_eval_samples(num_samples, eval_samples)
     plan = split_plan(num_samples, eval_samples if pools["unseen"] else 0, shard_size)
     if not pools["unseen"]:
         plan["unseen"] = []

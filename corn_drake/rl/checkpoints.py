@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
-
 from corn_drake.config import TrainConfig, load_config
 from corn_drake.errors import MissingInputError
+from corn_drake.io_utils import load_checkpoint
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.encoders import load_encoder
 
@@ -16,9 +15,10 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     run_dir = Path(run_dir)
     cfg = load_config(run_dir / "config.yaml", TrainConfig)
     ckpt = run_dir / "checkpoints" / "last.pt"
-    if not ckpt.is_file():
+    state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
+    if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder))
-    agent.load_state_dict(torch.load(ckpt, weights_only=False)["agent"])
+    agent.load_state_dict(state["agent"])
     agent.eval()
     return cfg, agent

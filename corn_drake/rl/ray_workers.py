@@ -32,13 +32,45 @@ class RolloutWorker:
 
 
 def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
-    """Local Ray by default, a cluster with `address`; no dashboard (nothing to serve here)."""
+    """Local Ray by default, a cluster with `address`; no dashboard (nothing to serve here).
+
+    A local Ray's processes end with this process, however it ends: see ray_reaper.py. (Ray
+    2.x starts its DashboardAgent and RuntimeEnvAgent even without the dashboard; there is no
+    switch to keep them away, so the reaper ends them.)
+    """
     if ray.is_initialized():
         return
     if address:
         ray.init(address=address, log_to_driver=False)
-    else:
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+        return
+    before = _child_pids()
+    ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+    _start_reaper(sorted(_child_pids() - before))
+
+
+# The running reaper; holding it keeps our end of its stdin pipe open until this process dies.
+_reaper = None
+
+
+def _child_pids() -> set[int]:
+    import psutil
+
+    return {p.pid for p in psutil.Process().children()}
+
+
+def _start_reaper(pids: list[int]) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    global _reaper
+    if not pids:
+        return
+    script = Path(__file__).with_name("ray_reaper.py")
+    # Its own session: a Ctrl-C or hang-up sent to our process group must not reach it.
+    _reaper = subprocess.Popen([sys.executable, str(script), *map(str, pids)],
+                               stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL, start_new_session=True)
 
 
 class RayEnvBatch:

@@ -1,8 +1,9 @@
 """PPO training of the teacher: rollouts (in-process or Ray workers), updates, logs, checkpoints.
 
-Run folder layout: config.yaml, checkpoints/last.pt (atomic), tb/ (TensorBoard), metrics.json,
-plots/learning_curve.png. A killed run resumes from checkpoints/last.pt at the same update with
-the same optimizer, normalisers and RNG state (environments start fresh episodes).
+Run folder layout: config.yaml, checkpoints/last.pt (atomic; the one before it kept as prev.pt),
+tb/ (TensorBoard), metrics.json, plots/learning_curve.png. A killed run resumes from
+checkpoints/last.pt (prev.pt if last.pt is unreadable) at the same update with the same
+optimizer, normalisers and RNG state (environments start fresh episodes).
 """
 
 from __future__ import annotations
@@ -14,13 +15,17 @@ import numpy as np
 import torch
 
 from corn_drake.config import TrainConfig
-from corn_drake.io_utils import atomic_path, write_json, write_text
+from corn_drake.errors import InputError
+from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json, write_text
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 from corn_drake.rl.vec_env import EnvBatch, EnvFactory
 
 WINDOW = 100  # finished episodes behind the logged success rate and return
+# What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
+CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "update_index",
+                   "history", "torch_rng", "generator", "np_rng")
 
 
 def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -56,8 +61,7 @@ class Trainer:
         # checkpoint so a resumed run's curves continue instead of restarting from zero.
         self.recent_episodes: list[dict] = []
         self.checkpoint_path = self.out / "checkpoints" / "last.pt"
-        if self.checkpoint_path.exists():
-            self._load()
+        self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -68,13 +72,14 @@ class Trainer:
                  "torch_rng": torch.get_rng_state(),
                  "generator": self.generator.get_state(),
                  "np_rng": self.np_rng.bit_generator.state, "policy": self.cfg.policy}
-        with atomic_path(self.checkpoint_path) as tmp:
-            torch.save(state, tmp)
+        save_checkpoint(self.checkpoint_path, state)
 
     def _load(self) -> None:
-        state = torch.load(self.checkpoint_path, weights_only=False)
+        state = load_checkpoint(self.checkpoint_path, required=CHECKPOINT_KEYS)
+        if state is None:
+            return
         if state["policy"] != self.cfg.policy:
-            raise ValueError(f"{self.checkpoint_path} holds a {state['policy']!r} policy, "
+            raise InputError(f"{self.checkpoint_path} holds a {state['policy']!r} policy, "
                              f"not {self.cfg.policy!r}")
         self.agent.load_state_dict(state["agent"])
         self.ppo.load_state_dict(state["ppo"])

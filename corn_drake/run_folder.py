@@ -1,0 +1,159 @@
+"""Output folders of the resumable commands (train, pretrain, contact-data, objects).
+
+Two guards keep a folder's contents from one coherent job:
+
+- `lock_folder`: an exclusive `flock` on FOLDER/.lock while a command writes there, so a second
+  command into the same folder refuses at once instead of interleaving its files with the
+  first's. The kernel drops the lock when the process ends, kill -9 included: no stale lock
+  survives a crash, and there is nothing to clean up by hand.
+- recorded arguments: a command resuming into a folder must be given the arguments that define
+  what is already there. `changed_arguments` compares recorded and requested values;
+  `resume_arguments` keeps them in FOLDER/arguments.json for the commands whose outputs do not
+  record them otherwise (train and pretrain compare their config.yaml instead).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping
+
+from corn_drake.errors import InputError
+from corn_drake.io_utils import write_json
+
+LOCK_NAME = ".lock"
+ARGUMENTS_NAME = "arguments.json"
+
+
+@contextmanager
+def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
+    """Creates `folder` and holds its lock for the duration of the block (InputError if another
+    process holds it, or if the folder cannot be written)."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise InputError(f"{folder}: cannot write there ({e.strerror or e})") from e
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise InputError(f"{folder} is in use by another corn-drake process (pid {holder}); "
+                             "wait for it to end or write to another folder") from None
+        # The holder's pid, for the message above (the lock itself is the flock, not this text).
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield folder
+    finally:
+        os.close(fd)  # closing the only descriptor releases the flock
+
+
+def changed_arguments(recorded: Mapping[str, Any], requested: Mapping[str, Any], *,
+                      may_grow: Iterable[str] = (), ignore: Iterable[str] = (),
+                      name: Callable[[str], str] = str) -> list[str]:
+    """One 'NAME: recorded X, requested Y' line per key whose value differs.
+
+    Keys in `ignore` may change freely (they do not define the output); keys in `may_grow` may
+    only grow (a run extended to more steps). Keys present on one side only are not compared:
+    they come from a version of the code with other fields, and nothing says what they were.
+    """
+    may_grow, ignore = set(may_grow), set(ignore)
+    lines = []
+    for key, new in requested.items():
+        if key in ignore or key not in recorded:
+            continue
+        old = recorded[key]
+        if key in may_grow and isinstance(old, (int, float)) and isinstance(new, (int, float)):
+            if new < old:
+                lines.append(f"{name(key)}: recorded {old!r}, requested {new!r} (it may only grow)")
+        elif old != new:
+            lines.append(f"{name(key)}: recorded {old!r}, requested {new!r}")
+    return lines
+
+
+def refuse_changed_arguments(folder: str | os.PathLike, recorded: Mapping[str, Any],
+                             requested: Mapping[str, Any], **options) -> None:
+    """InputError listing every argument that differs from what `folder` was made with
+    (options as for `changed_arguments`)."""
+    lines = changed_arguments(recorded, requested, **options)
+    if lines:
+        raise InputError(f"{folder} was made with other arguments: {'; '.join(lines)}. Repeat "
+                         "the recorded arguments to resume it, or write to a new folder")
+
+
+def read_recorded_arguments(folder: str | os.PathLike) -> dict | None:
+    """FOLDER/arguments.json, or None if the folder has none."""
+    path = Path(folder) / ARGUMENTS_NAME
+    if not path.is_file():
+        return None
+    try:
+        recorded = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"{path}: unreadable ({e}); delete it only if you know the folder's "
+                         "arguments match") from e
+    if not isinstance(recorded, dict):
+        raise InputError(f"{path}: expected a JSON object of arguments")
+    return recorded
+
+
+def resume_arguments(folder: str | os.PathLike, requested: Mapping[str, Any], *,
+                     may_grow: Iterable[str] = (),
+                     legacy: Callable[[Path], Mapping[str, Any] | None] | None = None) -> None:
+    """Refuses if `folder` was made with other values of the arguments that define its output
+    (`requested`, keyed by option name); otherwise records them in FOLDER/arguments.json before
+    any work, so even a killed job leaves its record.
+
+    `legacy(folder)` recovers the arguments of a folder made before the record was kept (from
+    its manifest, say), or returns None when nothing says.
+    """
+    folder = Path(folder)
+    recorded = read_recorded_arguments(folder)
+    if recorded is None and legacy is not None:
+        recorded = legacy(folder)
+    if recorded is not None:
+        refuse_changed_arguments(folder, recorded, requested, may_grow=may_grow)
+    write_json(folder / ARGUMENTS_NAME, dict(requested))
+
+
+def flat_fields(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested dict (a config's dataclasses.asdict) as {'a.b.c': leaf}: configs compared
+    field by field."""
+    if not isinstance(value, Mapping):
+        return {prefix: value}
+    out = {}
+    for key, item in value.items():
+        out.update(flat_fields(item, f"{prefix}.{key}" if prefix else str(key)))
+    return out
+
+
+def refuse_changed_config(folder: str | os.PathLike, recorded_path: str | os.PathLike, cfg: Any,
+                          **options) -> None:
+    """Compares a dataclass config with the one a run recorded (its config.yaml), field by field
+    (options as for `changed_arguments`, keys 'a.b.c'); nothing to compare for a new run.
+
+    The requested config goes through the same YAML dump and load as the recorded one, so only
+    real differences count, not float formatting.
+    """
+    import dataclasses
+
+    from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+
+    from corn_drake.config import load_config
+
+    recorded_path = Path(recorded_path)
+    if not recorded_path.is_file():
+        return
+    schema = type(cfg)
+    try:
+        recorded = load_config(recorded_path, schema)
+    except ValueError as e:
+        raise InputError(str(e) if isinstance(e, InputError) else
+                         f"{recorded_path}: the run's recorded config is unreadable ({e})") from e
+    requested = yaml_load_typed(schema=schema, data=yaml_dump_typed(cfg))
+    refuse_changed_arguments(folder, flat_fields(dataclasses.asdict(recorded)),
+                             flat_fields(dataclasses.asdict(requested)), **options)

@@ -1,0 +1,318 @@
+"""Output folders keep their data: refused resumes write nothing, one writer at a time, a corrupt
+checkpoint falls back to the previous one, evaluate checks its destinations first, a library run
+evaluates, and a killed driver leaves no Ray process behind."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from corn_drake import DIAGRAMS_DIR, REPO_ROOT
+from corn_drake.cli import main
+from corn_drake.config import TeacherDiagramConfig, TrainConfig, load_config
+from corn_drake.errors import InputError
+from corn_drake.run_folder import LOCK_NAME, lock_folder
+from tests.fixtures import write_tiny_library
+
+# A one-update state run: 2 envs x 16 steps, 10-step episodes.
+TRAIN = ["train", "--policy", "state", "--envs-per-worker", "2", "--rollout-steps", "16",
+         "--episode-steps", "10", "--no-progress"]
+# Subprocesses must import this checkout's corn_drake, whatever the installed one is.
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    """Every file under `folder` (the lock file aside: it is no output) with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != LOCK_NAME}
+
+
+def _one_error_line(capsys, *needles: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    return err
+
+
+@pytest.fixture(scope="module")
+def state_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("runs") / "state"
+    assert main([*TRAIN, "--steps", "32", "--out", str(run)]) == 0
+    return run
+
+
+@pytest.fixture
+def short_eval_config(tmp_path):
+    """The evaluation diagram with 5-step episodes (a test needs the loop, not the skill)."""
+    from pydrake.common.yaml import yaml_dump_typed
+
+    cfg = load_config(DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
+    cfg.task.episode_steps = 5
+    path = tmp_path / "eval_short.yaml"
+    path.write_text(yaml_dump_typed(cfg))
+    return path
+
+
+# --- issue 18 item 1: a refused resume leaves the run as it was -------------------------------
+def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_steps(
+        state_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(state_run, run)
+    before = _files(run)
+    capsys.readouterr()
+    assert main([*TRAIN, "--policy", "e2e", "--steps", "32", "--out", str(run)]) == 2
+    _one_error_line(capsys, str(run), "--policy: recorded 'state', requested 'e2e'")
+    assert main([*TRAIN, "--seed", "3", "--ppo", "lr=1e-5", "--steps", "32", "--out", str(run)]) == 2
+    _one_error_line(capsys, "--seed: recorded 0, requested 3", "--ppo lr")
+    assert main([*TRAIN, "--steps", "16", "--out", str(run)]) == 2  # fewer steps than done
+    _one_error_line(capsys, "--steps: recorded 32, requested 16")
+    assert _files(run) == before  # config.yaml, checkpoint, metrics: all untouched
+    # --steps may grow: the run resumes and its config records the new total.
+    assert main([*TRAIN, "--steps", "64", "--out", str(run)]) == 0
+    assert load_config(run / "config.yaml", TrainConfig).total_steps == 64
+    assert json.loads((run / "metrics.json").read_text())["global_step"] == 64
+
+
+# --- item 11: a corrupt latest checkpoint falls back to the previous one ----------------------
+def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
+        state_run, tmp_path, capsys, short_eval_config):
+    from corn_drake.rl.trainer import Trainer
+
+    run = tmp_path / "run"
+    shutil.copytree(state_run, run)
+    assert main([*TRAIN, "--steps", "64", "--out", str(run)]) == 0  # a second save: 32 -> prev.pt
+    last, prev = run / "checkpoints" / "last.pt", run / "checkpoints" / "prev.pt"
+    assert torch.load(prev, weights_only=False)["global_step"] == 32
+    capsys.readouterr()
+    with open(last, "r+b") as f:  # `truncate -s 1000 last.pt`
+        f.truncate(1000)
+    resumed = Trainer(load_config(run / "config.yaml", TrainConfig), run)
+    assert resumed.global_step == 32
+    err = capsys.readouterr().err
+    assert "warning" in err and str(last) in err and str(prev) in err
+    report = tmp_path / "ev.json"
+    assert main(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
+                 "--config", str(short_eval_config), "--report", str(report)]) == 0
+    assert "previous checkpoint" in capsys.readouterr().err
+    prev.write_bytes(b"not a checkpoint at all")
+    before = _files(run)
+    capsys.readouterr()
+    assert main([*TRAIN, "--steps", "96", "--out", str(run)]) == 2
+    _one_error_line(capsys, str(last), str(prev))
+    assert main(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
+                 "--report", str(report)]) == 2
+    _one_error_line(capsys, str(last))
+    assert _files(run) == before
+
+
+def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_path):
+    from corn_drake.io_utils import load_checkpoint, save_checkpoint
+
+    path = tmp_path / "checkpoints" / "last.pt"
+    assert load_checkpoint(path) is None  # nothing to resume
+    save_checkpoint(path, {"step": 1})
+    save_checkpoint(path, {"step": 2})
+    assert torch.load(path.with_name("prev.pt"))["step"] == 1
+    path.write_bytes(b"\0" * 100)  # damaged after the fact: must not become prev.pt
+    save_checkpoint(path, {"step": 3})
+    assert torch.load(path.with_name("prev.pt"))["step"] == 1
+    assert load_checkpoint(path, required=("step",))["step"] == 3
+    with pytest.raises(InputError, match="missing"):
+        load_checkpoint(path, required=("agent",))
+
+
+# --- item 2: evaluate checks its destinations before any episode ------------------------------
+@pytest.mark.parametrize("record", ["0", "1"])
+def test_evaluate_refuses_an_unwritable_destination_before_any_episode(
+        tmp_path, capsys, monkeypatch, record):
+    from corn_drake.commands import evaluate
+
+    def no_episode(*args, **kwargs):
+        raise AssertionError("episodes ran before the destination was checked")
+
+    monkeypatch.setattr(evaluate, "evaluate", no_episode)
+    capsys.readouterr()
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    if record == "0":  # the report's folder cannot exist: a file has its name
+        report = blocker / "ev.json"
+    else:  # the report's folder is fine, its recordings folder cannot be made
+        report = tmp_path / "ev.json"
+        (tmp_path / "ev_recordings").write_text("")
+    assert main(["evaluate", "--run", "still", "--episodes", "1", "--record", record,
+                 "--report", str(report)]) == 2
+    _one_error_line(capsys, "--report" if record == "0" else "--record", "cannot write")
+
+
+# --- item 3: one writer per output folder -----------------------------------------------------
+def _wait_for(predicate, seconds: float, what: str) -> None:
+    deadline = time.time() + seconds
+    while not predicate():
+        assert time.time() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.2)
+
+
+def test_second_train_into_a_running_run_is_refused_and_a_killed_one_leaves_no_lock(tmp_path, capsys):
+    run = tmp_path / "run"
+    first = subprocess.Popen([sys.executable, "-m", "corn_drake.cli", *TRAIN, "--steps", "100000",
+                              "--out", str(run)], env=ENV, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    try:
+        # config.yaml is written once the first run holds the lock and passed its checks.
+        _wait_for(lambda: (run / "config.yaml").is_file() or first.poll() is not None, 120,
+                  "the first run to start")
+        assert first.poll() is None, "the first run ended early"
+        capsys.readouterr()
+        t0 = time.time()
+        assert main([*TRAIN, "--steps", "64", "--out", str(run)]) == 2
+        assert time.time() - t0 < 10  # refused at once, not after training
+        _one_error_line(capsys, str(run), "in use", str(first.pid))
+    finally:
+        first.send_signal(signal.SIGKILL)
+        first.wait()
+    with lock_folder(run):  # the kernel released the killed run's lock
+        pass
+
+
+@pytest.mark.parametrize("command", ["pretrain", "contact-data", "objects"])
+def test_every_writing_command_refuses_a_locked_folder(tmp_path, capsys, command):
+    out = tmp_path / "out"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from corn_drake.run_folder import lock_folder\n"
+         "with lock_folder(sys.argv[1]):\n    print('locked', flush=True); time.sleep(60)", str(out)],
+        env=ENV, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        before = _files(out)
+        lib = write_tiny_library(tmp_path / "lib")
+        argv = {"pretrain": ["--data", str(tmp_path / "data"), "--steps", "2"],
+                "contact-data": ["--objects", str(lib), "--num-samples", "64"],
+                "objects": ["--num", "1", "--drops", "8"]}[command]
+        capsys.readouterr()
+        assert main([command, *argv, "--out", str(out), "--no-progress"]) == 2
+        _one_error_line(capsys, str(out), "in use")
+        assert _files(out) == before
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+    with lock_folder(out):
+        pass
+
+
+# --- item 5: a resumed job with other arguments refuses, naming them --------------------------
+def test_contact_data_refuses_another_seed_and_keeps_its_shards(tmp_path, capsys):
+    lib, out = write_tiny_library(tmp_path / "lib"), tmp_path / "data"
+
+    def contact_data(seed: int, shard_size: int = 64) -> int:
+        return main(["contact-data", "--objects", str(lib), "--num-samples", "64",
+                     "--eval-samples", "32", "--shard-size", str(shard_size), "--seed", str(seed),
+                     "--out", str(out), "--no-progress"])
+
+    assert contact_data(seed=0) == 0
+    before = _files(out)
+    capsys.readouterr()
+    assert contact_data(seed=1) == 2
+    _one_error_line(capsys, str(out), "--seed: recorded 0, requested 1")
+    assert _files(out) == before
+    # A dataset made before arguments.json was kept is checked against its manifest.
+    (out / "arguments.json").unlink()
+    assert contact_data(seed=0, shard_size=128) == 2
+    _one_error_line(capsys, "--shard-size: recorded 64, requested 128")
+    assert contact_data(seed=0) == 0  # the same arguments resume (nothing to redo)
+    assert _files(out)["train/shard_00000.npz"] == before["train/shard_00000.npz"]
+
+
+def test_objects_refuses_another_seed_and_grows_with_more_objects(tmp_path, capsys):
+    out = tmp_path / "lib"
+    args = ["objects", "--drops", "8", "--out", str(out), "--no-progress"]
+    assert main([*args, "--num", "1", "--seed", "0"]) == 0
+    before = _files(out)
+    capsys.readouterr()
+    assert main([*args, "--num", "1", "--seed", "1"]) == 2
+    _one_error_line(capsys, "--seed: recorded 0, requested 1")
+    assert main([*args, "--num", "1", "--drops", "9", "--seed", "0"]) == 2
+    _one_error_line(capsys, "--drops: recorded 8, requested 9")
+    assert _files(out) == before
+    assert main([*args, "--num", "2", "--seed", "0"]) == 0
+    assert len(json.loads((out / "manifest.json").read_text())["objects"]) == 2
+
+
+# --- item 13: a run trained on a whole library evaluates over the library ---------------------
+def test_evaluate_a_library_trained_run_over_the_requested_split(tmp_path, short_eval_config):
+    lib, run = tmp_path / "lib", tmp_path / "run"
+    assert main(["objects", "--num", "2", "--drops", "8", "--out", str(lib), "--no-progress"]) == 0
+    train_ids = [o["id"] for o in json.loads((lib / "manifest.json").read_text())["objects"]
+                 if o["split"] == "train"]
+    assert len(train_ids) == 2
+    assert main(["train", "--policy", "state", "--objects", str(lib), "--steps", "16",
+                 "--envs-per-worker", "2", "--rollout-steps", "8", "--episode-steps", "5",
+                 "--out", str(run), "--no-progress"]) == 0
+    report = tmp_path / "ev.json"
+    assert main(["evaluate", "--run", str(run), "--split", "train", "--episodes", "2",
+                 "--record", "0", "--config", str(short_eval_config), "--report", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert sorted(data["per_object"]) == sorted(train_ids)  # round-robin over both objects
+
+
+# --- item 16: a killed driver's local Ray ends with it ----------------------------------------
+DRIVER = """
+import ray
+from corn_drake.rl.ray_workers import init_ray
+init_ray(num_cpus=1)
+@ray.remote(num_cpus=0)
+def pid():
+    import os
+    return os.getpid()
+ray.get(pid.remote())
+print("ready", flush=True)
+import time
+time.sleep(120)
+"""
+
+
+def test_killed_driver_leaves_no_ray_process_behind():
+    psutil = pytest.importorskip("psutil")
+    driver = subprocess.Popen([sys.executable, "-c", DRIVER], env=ENV, stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, text=True)
+    started = []
+    try:
+        assert driver.stdout.readline().strip() == "ready"
+        tree = psutil.Process(driver.pid)
+
+        def agents_up():
+            started[:] = tree.children(recursive=True)
+            return any("Agent" in " ".join(p.cmdline()) for p in started if p.is_running())
+
+        _wait_for(agents_up, 20, "Ray's agents to start")  # what used to outlive the driver
+        time.sleep(0.5)
+        driver.send_signal(signal.SIGKILL)
+        driver.wait()
+        deadline = time.time() + 5
+        while time.time() < deadline and any(_running(p) for p in started):
+            time.sleep(0.2)
+        left = [" ".join(p.cmdline())[:80] for p in started if _running(p)]
+        assert not left, f"still running 5 s after the driver's death: {left}"
+    finally:
+        if driver.poll() is None:
+            driver.kill()
+            driver.wait()
+        for p in started:  # only what this test's driver started
+            if _running(p):
+                p.kill()
+
+
+def _running(process) -> bool:
+    import psutil
+
+    try:
+        return process.is_running() and process.status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
+        return False
