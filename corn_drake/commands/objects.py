@@ -15,6 +15,17 @@ def add_arguments(parser):
     parser.add_argument("--no-progress", action="store_true")
 
 
+def _split_summary(objects: list[dict]) -> str:
+    """'N train + M unseen objects (k family, l member)': the unseen count by kind of novelty."""
+    from collections import Counter
+
+    splits = Counter(o["split"] for o in objects)
+    groups = Counter(o.get("unseen_group") for o in objects if o["split"] == "unseen")
+    kinds = ", ".join(f"{n} {g}" for g, n in sorted(groups.items(), key=lambda kv: str(kv[0])))
+    return (f"{splits['train']} train + {splits['unseen']} unseen objects"
+            + (f" ({kinds})" if kinds else ""))
+
+
 def run(args) -> int:
     from corn_drake.assets.library import build_procedural, ingest_folder
     from corn_drake.assets.process import ProcessConfig
@@ -25,9 +36,8 @@ def run(args) -> int:
         manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
     else:
         manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
-    splits = [o["split"] for o in manifest["objects"]]
-    print(f"{splits.count('train')} train + {splits.count('unseen')} unseen objects, "
-          f"{len(manifest['rejected'])} rejected; manifest {args.out}/manifest.json")
+    print(_split_summary(manifest["objects"]) + f", {len(manifest['rejected'])} rejected; "
+          f"manifest {args.out}/manifest.json")
     for r in manifest["rejected"]:
         print(f"  rejected {r['source']}: {r['reason']}")
     return 0
