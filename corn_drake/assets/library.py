@@ -35,6 +35,12 @@ def list_objects(library: str | Path, split: str | None = None) -> list[str]:
     return [o["id"] for o in read_manifest(library)["objects"] if split in (None, o["split"])]
 
 
+def object_groups(library: str | Path) -> dict[str, str]:
+    """Object id -> its group for per-group reports: the kind of unseen object ("family",
+    "member", "ingested"), or the split ("train"; "unseen" in libraries built before groups)."""
+    return {o["id"]: o.get("unseen_group") or o["split"] for o in read_manifest(library)["objects"]}
+
+
 def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
     library = Path(library)
     entries = {o["id"]: o for o in read_manifest(library)["objects"]}
