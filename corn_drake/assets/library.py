@@ -1,7 +1,7 @@
 """The object library on disk: building it (procedural or from a mesh folder) and reading it.
 
 DIR/manifest.json: {"objects": [{id, source, family, split, unseen_group, radius, mass, thin,
-hulls, visual, cloud, stable_poses, ...}], "rejected": [{source, reason}], "split_rule": {...},
+hulls, visual, cloud, stable_poses, warnings, hull_repairs, ...}], "rejected": [{source, reason}], "split_rule": {...},
 "timings": {...}}. Paths are relative to DIR; every file is written atomically, and a re-run skips
 objects already in the manifest. Splits follow assets/splits.py and are re-assigned over the
 whole manifest at every save.
@@ -72,11 +72,17 @@ def _load_or_new(out: Path) -> dict:
 
 
 def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
-    fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
+    try:
+        fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
+    except Rejected as e:
+        manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
+        return
     if fields["num_stable_poses"] == 0:
         manifest["rejected"].append({"source": entry["source"], "reason": "no stable pose found"})
         return
-    manifest["objects"].append({**entry, **fields})
+    # Warnings from loading the file (ingest) come first, then those from processing it.
+    warnings = entry.get("warnings", []) + fields["warnings"]
+    manifest["objects"].append({**entry, **fields, "warnings": warnings})
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
