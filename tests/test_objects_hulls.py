@@ -83,7 +83,7 @@ def _blob() -> trimesh.Trimesh:
     return trimesh.Trimesh(v * radius[:, None] * [0.06, 0.04, 0.035], sphere.faces)
 
 
-def test_objects_command_on_real_meshes_writes_only_loadable_hulls(tmp_path):
+def test_objects_command_on_real_meshes_writes_only_loadable_hulls(tmp_path, capsys):
     from corn_drake.cli import main
 
     src = tmp_path / "meshes"
@@ -108,3 +108,9 @@ def test_objects_command_on_real_meshes_writes_only_loadable_hulls(tmp_path):
     assert written == sorted(h for o in manifest["objects"] for h in o["hulls"])
     cluster = next(o for o in manifest["objects"] if o["id"] == "mesh_corner_cluster")
     assert any("repaired" in r for r in cluster["hull_repairs"])
+    # Each object reports the share of its training-setting poses the second setting kept.
+    for o in manifest["objects"]:
+        d = o["drops"]
+        assert o["stable_pose_kept_fraction"] == d["held_second_setting"] / d["verified"]
+        assert d["held_second_setting"] == o["num_stable_poses"] > 0
+    assert "stable poses holding under both contact settings" in capsys.readouterr().out

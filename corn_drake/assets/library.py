@@ -1,7 +1,7 @@
 """The object library on disk: building it (procedural or from a mesh folder) and reading it.
 
 DIR/manifest.json: {"objects": [{id, source, family, split, unseen_group, radius, mass, thin,
-hulls, visual, cloud, stable_poses, warnings, hull_repairs, ...}], "rejected": [{source, reason}], "split_rule": {...},
+hulls, visual, cloud, stable_poses, warnings, hull_repairs, stable_pose_kept_fraction, ...}], "rejected": [{source, reason}], "split_rule": {...},
 "timings": {...}}. Paths are relative to DIR; every file is written atomically, and a re-run skips
 objects already in the manifest. Splits follow assets/splits.py and are re-assigned over the
 whole manifest at every save.
@@ -71,6 +71,14 @@ def _load_or_new(out: Path) -> dict:
     return {"objects": [], "rejected": [], "timings": {}}
 
 
+def _no_pose_reason(fields: dict) -> str:
+    held = fields["drops"]["verified"]
+    if held:
+        return (f"no stable pose found: none of the {held} holding in the training contact "
+                "setting holds in the second one")
+    return "no stable pose found"
+
+
 def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
     try:
         fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
@@ -78,7 +86,7 @@ def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) 
         manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
         return
     if fields["num_stable_poses"] == 0:
-        manifest["rejected"].append({"source": entry["source"], "reason": "no stable pose found"})
+        manifest["rejected"].append({"source": entry["source"], "reason": _no_pose_reason(fields)})
         return
     # Warnings from loading the file (ingest) come first, then those from processing it.
     warnings = entry.get("warnings", []) + fields["warnings"]
