@@ -6,6 +6,7 @@ import pytest
 
 from corn_drake.assets.library import object_groups
 from corn_drake.commands.evaluate import success_by_group
+from corn_drake.errors import InputError
 from tests.fixtures import write_tiny_library
 
 
@@ -25,7 +26,7 @@ def test_success_is_aggregated_per_group():
 
 
 def test_an_object_without_a_group_is_named():
-    with pytest.raises(KeyError, match="teapot"):
+    with pytest.raises(InputError, match="teapot"):
         success_by_group(_rows([("teapot", True)]), {"cuboid_000": "member"})
 
 

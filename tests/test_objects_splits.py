@@ -6,6 +6,7 @@ import pytest
 
 from corn_drake.assets.families import FAMILIES, UNSEEN_FAMILIES
 from corn_drake.assets.splits import assign_splits, held_out_count
+from corn_drake.errors import InputError
 
 
 def _procedural(num: int) -> list[dict]:
@@ -77,9 +78,9 @@ def test_ingested_meshes_get_their_own_group():
 
 
 def test_bad_entries_and_fractions_are_named():
-    with pytest.raises(KeyError, match="family"):
+    with pytest.raises(InputError, match="family"):
         assign_splits([{"id": "cuboid_000"}], seed=0)
-    with pytest.raises(ValueError, match="fraction"):
+    with pytest.raises(InputError, match="fraction"):
         held_out_count(5, fraction=1.0)
 
 

@@ -6,6 +6,7 @@ from pydrake.multibody.plant import CalcContactFrictionFromSurfaceProperties
 from pydrake.systems.framework import DiagramBuilder
 
 from corn_drake.config import SceneConfig
+from corn_drake.errors import InputError
 from corn_drake.scene.builder import build_scene
 from corn_drake.scene.friction import geometry_friction
 from corn_drake.scene.objects import box_spec
@@ -65,7 +66,7 @@ def test_coefficients_stay_positive_and_bounded_for_any_positive_frictions():
 
 def test_bad_friction_is_named():
     for bad in (0.0, -0.5, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="table_friction"):
+        with pytest.raises(InputError, match="table_friction"):
             geometry_friction(0.8, bad, 1.0)
 
 

@@ -19,6 +19,7 @@ import zlib
 from collections import defaultdict
 
 from corn_drake.assets.families import UNSEEN_FAMILIES
+from corn_drake.errors import InputError
 
 INGESTED_FAMILY = "ingested"
 MEMBER_FRACTION = 0.2
@@ -29,7 +30,7 @@ GROUPS = ("family", "member", INGESTED_FAMILY)
 def held_out_count(members: int, fraction: float = MEMBER_FRACTION) -> int:
     """How many of a (not held-out) family's members are unseen."""
     if not 0.0 <= fraction < 1.0:
-        raise ValueError(f"member fraction must be in [0, 1), got {fraction}")
+        raise InputError(f"member fraction must be in [0, 1), got {fraction}")
     if members < MIN_MEMBERS_FOR_HOLDOUT:
         return 0
     # round() keeps the share near `fraction`; max(1, ...) is the "every family" promise; the
@@ -48,7 +49,7 @@ def assign_splits(objects: list[dict], seed: int, fraction: float = MEMBER_FRACT
     for o in objects:
         for key in ("id", "family"):
             if key not in o:
-                raise KeyError(f"manifest entry {o.get('id', o)!r} has no {key!r}")
+                raise InputError(f"manifest entry {o.get('id', o)!r} has no {key!r}")
         by_family[o["family"]].append(o)
     for family, members in by_family.items():
         if family in UNSEEN_FAMILIES:

@@ -86,10 +86,12 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
 def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
     """Group -> {success_rate, episodes, objects} over report rows; `groups` maps object id -> group
     (assets.library.object_groups), so "unseen" splits into new families and new members."""
+    from corn_drake.errors import InputError
+
     by_group: dict[str, list[dict]] = defaultdict(list)
     for row in episodes:
         if row["object"] not in groups:
-            raise KeyError(f"episode {row['episode']}: object {row['object']!r} has no group")
+            raise InputError(f"episode {row['episode']}: object {row['object']!r} has no group")
         by_group[groups[row["object"]]].append(row)
     return {g: {"success_rate": float(np.mean([r["success"] for r in rows])),
                 "episodes": len(rows), "objects": len({r["object"] for r in rows})}

@@ -22,6 +22,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from corn_drake.errors import InputError
+
 
 @dataclasses.dataclass(frozen=True)
 class GeometryFriction:
@@ -41,7 +43,7 @@ def geometry_friction(object_mu: float, table_mu: float, finger_mu: float) -> Ge
     for name, mu in (("object_friction", object_mu), ("table_friction", table_mu),
                      ("finger_friction", finger_mu)):
         if not (math.isfinite(mu) and mu > 0):
-            raise ValueError(f"{name} must be a positive finite friction coefficient, got {mu!r}")
+            raise InputError(f"{name} must be a positive finite friction coefficient, got {mu!r}")
     object_table = (object_mu + table_mu) / 2
     object_finger = (object_mu + finger_mu) / 2
     o = max(object_table, object_finger)
