@@ -1,4 +1,5 @@
-"""Stable poses are kept only if they hold under both contact settings; the kept share is reported."""
+"""Stable poses are kept only if they hold under both contact settings; the kept share is
+reported."""
 
 import numpy as np
 import trimesh

@@ -111,7 +111,8 @@ def _merge_close(points: np.ndarray, tol: float) -> np.ndarray:
 def _distance_to_segments(p: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Distances from point p to the segments u[i]-w[i]."""
     d = w - u
-    t = np.clip(np.einsum("ij,ij->i", p - u, d) / np.einsum("ij,ij->i", d, d).clip(min=1e-300), 0, 1)
+    along = np.einsum("ij,ij->i", p - u, d) / np.einsum("ij,ij->i", d, d).clip(min=1e-300)
+    t = np.clip(along, 0, 1)
     return np.linalg.norm(p - (u + t[:, None] * d), axis=1)
 
 

@@ -1,10 +1,10 @@
 """The object library on disk: building it (procedural or from a mesh folder) and reading it.
 
 DIR/manifest.json: {"objects": [{id, source, family, split, unseen_group, radius, mass, thin,
-hulls, visual, cloud, stable_poses, warnings, hull_repairs, stable_pose_kept_fraction, ...}], "rejected": [{source, reason}], "split_rule": {...},
-"timings": {...}}. Paths are relative to DIR; every file is written atomically, and a re-run skips
-objects already in the manifest. Splits follow assets/splits.py and are re-assigned over the
-whole manifest at every save.
+hulls, visual, cloud, stable_poses, warnings, hull_repairs, stable_pose_kept_fraction, ...}],
+"rejected": [{source, reason}], "split_rule": {...}, "timings": {...}}. Paths are relative to
+DIR; every file is written atomically, and a re-run skips objects already in the manifest.
+Splits follow assets/splits.py and are re-assigned over the whole manifest at every save.
 """
 
 from __future__ import annotations

@@ -160,7 +160,8 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
 def _touching(pose: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     """`pose` moved vertically so its lowest hull vertex touches the table top. A pose rests sunk
     into the training setting's compliant table (~0.4 mm); placed as is, a thin compliant hull
-    starts that deep in the rigid table and is thrown off it (measured: a 6 mm plate jumped 5 cm)."""
+    starts that deep in the rigid table and is thrown off it (measured: a 6 mm plate jumped
+    5 cm)."""
     R = RotationMatrix(_quat(pose[3:])).matrix()
     out = pose.copy()
     out[2] = TABLE_TOP_Z - (vertices @ R.T)[:, 2].min()

@@ -130,7 +130,8 @@ def run(args) -> int:
     if args.objects:
         from corn_drake.assets.library import object_groups
 
-        report["success_by_group"] = success_by_group(report["episodes"], object_groups(args.objects))
+        groups = object_groups(args.objects)
+        report["success_by_group"] = success_by_group(report["episodes"], groups)
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")
