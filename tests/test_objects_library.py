@@ -15,7 +15,7 @@ from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
-KEYS = {"id", "source", "family", "split", "radius", "mass", "thin", "hulls", "visual", "cloud",
+KEYS = {"id", "source", "family", "split", "unseen_group", "radius", "mass", "thin", "hulls", "visual", "cloud",
         "stable_poses"}
 
 

@@ -1,8 +1,10 @@
 """The object library on disk: building it (procedural or from a mesh folder) and reading it.
 
-DIR/manifest.json: {"objects": [{id, source, family, split, radius, mass, thin, hulls, visual,
-cloud, stable_poses, ...}], "rejected": [{source, reason}], "timings": {...}}. Paths are relative
-to DIR; every file is written atomically, and a re-run skips objects already in the manifest.
+DIR/manifest.json: {"objects": [{id, source, family, split, unseen_group, radius, mass, thin,
+hulls, visual, cloud, stable_poses, warnings, hull_repairs, stable_pose_kept_fraction, ...}],
+"rejected": [{source, reason}], "split_rule": {...}, "timings": {...}}. Paths are relative to
+DIR; every file is written atomically, and a re-run skips objects already in the manifest.
+Splits follow assets/splits.py and are re-assigned over the whole manifest at every save.
 """
 
 from __future__ import annotations
@@ -18,10 +20,9 @@ from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_
 from corn_drake.assets.manifest import manifest_path, read_manifest, require_fields
 from corn_drake.assets.process import ProcessConfig, process_object
 from corn_drake.errors import InputError, MissingInputError
+from corn_drake.assets.splits import INGESTED_FAMILY, MEMBER_FRACTION, assign_splits
 from corn_drake.io_utils import write_json
 from corn_drake.scene.objects import ObjectSpec
-
-UNSEEN_EVERY = 8  # besides whole unseen families, 1 in 8 members of the others is unseen
 
 
 # Manifest fields load_object_spec reads (ObjectSpec needs all of them to build the scene).
@@ -31,6 +32,12 @@ SPEC_FIELDS = ("mass", "unit_inertia", "cloud", "stable_poses", "radius", "bbox_
 
 def list_objects(library: str | Path, split: str | None = None) -> list[str]:
     return [o["id"] for o in read_manifest(library)["objects"] if split in (None, o["split"])]
+
+
+def object_groups(library: str | Path) -> dict[str, str]:
+    """Object id -> its group for per-group reports: the kind of unseen object ("family",
+    "member", "ingested"), or the split ("train"; "unseen" in libraries built before groups)."""
+    return {o["id"]: o.get("unseen_group") or o["split"] for o in read_manifest(library)["objects"]}
 
 
 def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
@@ -65,7 +72,12 @@ def _load_array(library: Path, entry: dict, key: str) -> np.ndarray:
                          f"{key} file {path} ({e})") from None
 
 
-def _save(out: Path, manifest: dict) -> None:
+def _save(out: Path, manifest: dict, seed: int) -> None:
+    # The split depends on how many members each family has: re-assign it over the whole manifest
+    # so a manifest on disk is always split as a complete build with these objects would be.
+    assign_splits(manifest["objects"], seed)
+    manifest["split_rule"] = {"seed": seed, "unseen_families": sorted(UNSEEN_FAMILIES),
+                              "member_fraction": MEMBER_FRACTION}
     write_json(out / "manifest.json", manifest)
 
 
@@ -76,12 +88,26 @@ def _load_or_new(out: Path) -> dict:
     return new
 
 
+def _no_pose_reason(fields: dict) -> str:
+    held = fields["drops"]["verified"]
+    if held:
+        return (f"no stable pose found: none of the {held} holding in the training contact "
+                "setting holds in the second one")
+    return "no stable pose found"
+
+
 def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
-    fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
-    if fields["num_stable_poses"] == 0:
-        manifest["rejected"].append({"source": entry["source"], "reason": "no stable pose found"})
+    try:
+        fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
+    except Rejected as e:
+        manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
         return
-    manifest["objects"].append({**entry, **fields})
+    if fields["num_stable_poses"] == 0:
+        manifest["rejected"].append({"source": entry["source"], "reason": _no_pose_reason(fields)})
+        return
+    # Warnings from loading the file (ingest) come first, then those from processing it.
+    warnings = entry.get("warnings", []) + fields["warnings"]
+    manifest["objects"].append({**entry, **fields, "warnings": warnings})
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
@@ -102,24 +128,21 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
             continue
         obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
         rng = np.random.default_rng(obj_seed)
-        unseen = family in UNSEEN_FAMILIES or member % UNSEEN_EVERY == UNSEEN_EVERY - 1
-        entry = {"id": object_id, "source": f"procedural:{family}:{obj_seed}", "family": family,
-                 "split": "unseen" if unseen else "train"}
+        entry = {"id": object_id, "source": f"procedural:{family}:{obj_seed}", "family": family}
         try:
             mesh = make_family_mesh(family, obj_seed)
         except ValueError as e:
             manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
             continue
         _add(out, manifest, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
-        _save(out, manifest)  # after every object: a killed run resumes here
+        _save(out, manifest, seed)  # after every object: a killed run resumes here
     manifest["timings"]["build_s"] = manifest["timings"].get("build_s", 0.0) + time.perf_counter() - t0
-    _save(out, manifest)
+    _save(out, manifest, seed)
     return manifest
 
 
 def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
-                  cfg: ProcessConfig | None = None, progress: bool = True,
-                  unseen_fraction: float = 0.2) -> dict:
+                  cfg: ProcessConfig | None = None, progress: bool = True) -> dict:
     from tqdm import tqdm
 
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
@@ -142,15 +165,14 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
             mesh, warnings = load_watertight(path)
         except Rejected as e:
             manifest["rejected"].append({"source": rel, "reason": str(e)})
-            _save(out, manifest)
+            _save(out, manifest, seed)
             continue
         object_id = "mesh_" + "".join(c if c.isalnum() else "_" for c in Path(rel).with_suffix("").as_posix())
-        entry = {"id": object_id, "source": rel, "family": "ingested", "warnings": warnings,
-                 "split": "unseen" if rng.uniform() < unseen_fraction else "train"}
+        entry = {"id": object_id, "source": rel, "family": INGESTED_FAMILY, "warnings": warnings}
         convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
         try:
             _add(out, manifest, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
         except Exception as e:  # one bad object must not end the run
             manifest["rejected"].append({"source": rel, "reason": f"processing failed: {e}"})
-        _save(out, manifest)
+        _save(out, manifest, seed)
     return manifest

@@ -10,8 +10,10 @@ import numpy as np
 import trimesh
 
 from corn_drake.assets.decompose import DecompositionConfig, decompose, union_volume
+from corn_drake.assets.hulls import HullConfig, loadable_hull, obj_text
+from corn_drake.assets.ingest import Rejected
 from corn_drake.assets.stable_poses import DropConfig, find_stable_poses
-from corn_drake.io_utils import atomic_path, save_npy
+from corn_drake.io_utils import save_npy, write_text
 from corn_drake.scene.objects import ObjectSpec
 
 
@@ -24,6 +26,7 @@ class ProcessConfig:
     cloud_points: int = 2048
     thin_ratio: float = 2.5
     decomposition: DecompositionConfig = dataclasses.field(default_factory=DecompositionConfig)
+    hulls: HullConfig = dataclasses.field(default_factory=HullConfig)
     drops: DropConfig = dataclasses.field(default_factory=DropConfig)
 
 
@@ -36,9 +39,31 @@ def normalise(mesh: trimesh.Trimesh, radius: float) -> trimesh.Trimesh:
 
 
 def _write_obj(path: Path, mesh: trimesh.Trimesh) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(trimesh.exchange.obj.export_obj(mesh, include_normals=False,
-                                                       include_texture=False))
+    write_text(path, obj_text(mesh))
+
+
+def loadable_hulls(hulls: list[trimesh.Trimesh], cfg: HullConfig
+                   ) -> tuple[list[tuple[str, trimesh.Trimesh]], list[str], list[str]]:
+    """([(OBJ text, hull)] Drake loads both ways, repair notes, warnings for dropped hulls);
+    raises Rejected when no hull is left."""
+    kept, repairs, dropped = [], [], []
+    for i, hull in enumerate(hulls):
+        text, mesh, note = loadable_hull(hull, cfg)
+        if text is None:
+            dropped.append(f"convex piece {i} {note}")
+            continue
+        if note:
+            repairs.append(f"convex piece {i} {note}")
+        kept.append((text, mesh))
+    if not kept:
+        raise Rejected(f"no convex hull Drake can load ({'; '.join(dropped)})")
+    return kept, repairs, dropped
+
+
+def kept_fraction(drop_stats: dict) -> float:
+    """Share of the poses holding in the training setting that hold in the second one too."""
+    held = drop_stats["verified"]
+    return drop_stats["held_second_setting"] / held if held else 0.0
 
 
 def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.random.Generator,
@@ -54,6 +79,12 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
     else:
         hulls, hull_ratio, coacd_runs = decompose(mesh, cfg.decomposition, cache_dir)
     timings["decompose_s"] = time.perf_counter() - t
+    t_check = time.perf_counter()
+    checked, repairs, dropped = loadable_hulls(hulls, cfg.hulls)
+    hulls = [h for _, h in checked]
+    if repairs or dropped:
+        hull_ratio = union_volume(hulls) / float(mesh.volume)
+    timings["hull_check_s"] = time.perf_counter() - t_check
     t = time.perf_counter()
     points, faces = trimesh.sample.sample_surface(mesh, cfg.cloud_points, seed=int(rng.integers(1 << 31)))
     cloud = np.concatenate([points, mesh.face_normals[faces]], axis=1)
@@ -64,8 +95,8 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
     folder = out / object_id
     folder.mkdir(parents=True, exist_ok=True)
     hull_paths = []
-    for i, hull in enumerate(hulls):
-        _write_obj(folder / f"hull_{i:02d}.obj", hull)
+    for i, (text, _) in enumerate(checked):  # exactly the text Drake was shown
+        write_text(folder / f"hull_{i:02d}.obj", text)
         hull_paths.append(folder / f"hull_{i:02d}.obj")
     _write_obj(folder / "visual.obj", mesh)
     save_npy(folder / "cloud.npy", cloud.astype(np.float64))
@@ -76,6 +107,7 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
     poses, drop_stats = find_stable_poses(spec, np.concatenate([h.vertices for h in hulls]), rng,
                                           cfg.drops)
     timings["stable_poses_s"] = time.perf_counter() - t_drop
+    timings["second_setting_s"] = drop_stats["second_setting_s"]
     save_npy(folder / "stable_poses.npy", poses)
     save_npy(folder / "bbox_corners.npy", corners)
     save_npy(folder / "unit_inertia.npy", np.asarray(mesh.moment_inertia / mesh.mass))
@@ -85,5 +117,7 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
             "cloud": f"{object_id}/cloud.npy", "stable_poses": f"{object_id}/stable_poses.npy",
             "bbox_corners": f"{object_id}/bbox_corners.npy",
             "unit_inertia": f"{object_id}/unit_inertia.npy",
-            "num_hulls": len(hulls), "num_stable_poses": int(len(poses)), "drops": drop_stats,
+            "num_hulls": len(hulls), "hull_repairs": repairs, "warnings": dropped,
+            "num_stable_poses": int(len(poses)), "drops": drop_stats,
+            "stable_pose_kept_fraction": kept_fraction(drop_stats),
             "hull_volume_ratio": hull_ratio, "coacd_runs": coacd_runs, "timings": timings}

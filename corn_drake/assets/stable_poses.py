@@ -5,11 +5,19 @@ axis up or down), from 0.2 m above the table. A drop counts when the object stay
 consecutive physics steps and its centre of mass projects inside its support polygon (the hull
 vertices touching the table). Poses are deduplicated modulo yaw by the gravity direction in the
 object frame and stored canonicalised: yaw removed, above (0, 0), table top at z = 0.4.
+
+A pose is kept only if, placed exactly as stored, it holds for 1 s under two contact settings:
+the training one (rigid hulls on a compliant table, 12.5 ms steps) and a finer one (compliant
+hulls on a rigid table, 1 ms steps). A pose that only the training setting's contact holds up
+(measured: a bunny and a domino standing on its end fell in the finer setting) is an artefact of
+that setting, not a resting pose of the object.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import time
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
@@ -38,6 +46,14 @@ class DropConfig:
     verify_time: float = 1.0
     verify_position: float = 0.005
     verify_angle: float = 0.025
+    # The second contact setting every kept pose must also hold under, with the library's promise
+    # as tolerance (not half of it): a pose found in the training setting rests a little sunk and
+    # tilted there (a flat 15 g plate: 0.03 rad), and settles by up to ~0.04 rad in the second
+    # setting; a pose that is not a resting pose there falls much further than 0.05 rad.
+    second_time_step: float = 0.001
+    second_compliant_body: str = "object"
+    second_position: float = 0.01
+    second_angle: float = 0.05
 
 
 def _random_rotation(rng) -> np.ndarray:
@@ -80,13 +96,9 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
                       cfg: DropConfig = DropConfig(), scene_cfg: SceneConfig | None = None):
     """(poses (K, 7), stats). `vertices` are the hulls' vertices in the object frame."""
     scene_cfg = scene_cfg or SceneConfig()
-    builder = DiagramBuilder()
-    plant, _, body = build_table_scene(builder, scene_cfg, spec)
-    diagram = builder.Build()
-    sim = Simulator(diagram)
-    ctx = sim.get_mutable_context()
-    default = diagram.CreateDefaultContext()
-    pc = plant.GetMyMutableContextFromRoot(ctx)
+    table = _TableSim(spec, scene_cfg)
+    sim, ctx, default, plant, pc, body = (table.sim, table.ctx, table.default, table.plant,
+                                          table.plant_context, table.body)
     h = scene_cfg.physics.time_step
     canonical = _canonical_rotations()
     n_canonical = int(round(cfg.drops * cfg.canonical_fraction))
@@ -131,26 +143,65 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
         kept_z.append(p[2])
     candidates = [np.array([0.0, 0.0, z, *_wxyz(R)]) for R, z in zip(kept_R, kept_z)]
     # A drop can come to rest on a knife edge; keep only poses that, placed exactly as stored,
-    # stay within verify_position / verify_angle for verify_time.
-    poses = [p for p in candidates if _holds(sim, ctx, default, plant, pc, body, p, cfg)]
+    # stay within verify_position / verify_angle for verify_time, in both contact settings. The
+    # finer setting costs ~10x more per simulated second, so it sees only the first one's poses.
+    held = [p for p in candidates
+            if table.holds(p, cfg.verify_time, cfg.verify_position, cfg.verify_angle)]
+    t_second = time.perf_counter()
+    second = _TableSim(spec, second_setting(scene_cfg, cfg))
+    poses = [p for p in held if second.holds(_touching(p, vertices), cfg.verify_time,
+                                             cfg.second_position, cfg.second_angle)]
     return np.array(poses).reshape(-1, 7), {
         "drops": cfg.drops, "settled": settled, "supported": supported,
-        "unique": len(candidates), "verified": len(poses), "solver_failures": failed}
+        "unique": len(candidates), "verified": len(held), "held_second_setting": len(poses),
+        "solver_failures": failed, "second_setting_s": time.perf_counter() - t_second}
 
 
-def _holds(sim, ctx, default, plant, pc, body, pose, cfg: DropConfig) -> bool:
-    ctx.SetTimeStateAndParametersFrom(default)
-    X0 = RigidTransform(RotationMatrix(_quat(pose[3:])), pose[:3])
-    plant.SetFreeBodyPose(pc, body, X0)
-    sim.Initialize()
-    try:
-        sim.AdvanceTo(cfg.verify_time)
-    except RuntimeError:
-        return False
-    X1 = plant.EvalBodyPoseInWorld(pc, body)
-    angle = (X1.rotation().inverse() @ X0.rotation()).ToAngleAxis().angle()
-    return (np.linalg.norm(X1.translation() - X0.translation()) < cfg.verify_position
-            and angle < cfg.verify_angle)
+def _touching(pose: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """`pose` moved vertically so its lowest hull vertex touches the table top. A pose rests sunk
+    into the training setting's compliant table (~0.4 mm); placed as is, a thin compliant hull
+    starts that deep in the rigid table and is thrown off it (measured: a 6 mm plate jumped
+    5 cm)."""
+    R = RotationMatrix(_quat(pose[3:])).matrix()
+    out = pose.copy()
+    out[2] = TABLE_TOP_Z - (vertices @ R.T)[:, 2].min()
+    return out
+
+
+def second_setting(scene_cfg: SceneConfig, cfg: DropConfig) -> SceneConfig:
+    """The scene config of the second contact setting stable poses are verified under."""
+    fine = copy.deepcopy(scene_cfg)
+    fine.physics.time_step = cfg.second_time_step
+    fine.physics.compliant_body = cfg.second_compliant_body
+    return fine
+
+
+class _TableSim:
+    """The object alone on the table, in one contact setting, ready to be placed and run."""
+
+    def __init__(self, spec: ObjectSpec, scene_cfg: SceneConfig):
+        builder = DiagramBuilder()
+        self.plant, _, self.body = build_table_scene(builder, scene_cfg, spec)
+        diagram = builder.Build()
+        self.sim = Simulator(diagram)
+        self.ctx = self.sim.get_mutable_context()
+        self.default = diagram.CreateDefaultContext()
+        self.plant_context = self.plant.GetMyMutableContextFromRoot(self.ctx)
+
+    def holds(self, pose: np.ndarray, duration: float, position: float, angle: float) -> bool:
+        """Placed at `pose` at rest, the object moves less than `position` (m) and turns less than
+        `angle` (rad) in `duration` s (a solver failure counts as not holding)."""
+        self.ctx.SetTimeStateAndParametersFrom(self.default)
+        X0 = RigidTransform(RotationMatrix(_quat(pose[3:])), pose[:3])
+        self.plant.SetFreeBodyPose(self.plant_context, self.body, X0)
+        self.sim.Initialize()
+        try:
+            self.sim.AdvanceTo(duration)
+        except RuntimeError:
+            return False
+        X1 = self.plant.EvalBodyPoseInWorld(self.plant_context, self.body)
+        turned = (X1.rotation().inverse() @ X0.rotation()).ToAngleAxis().angle()
+        return np.linalg.norm(X1.translation() - X0.translation()) < position and turned < angle
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:

@@ -96,6 +96,21 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
             "episodes": rows}
 
 
+def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
+    """Group -> {success_rate, episodes, objects} over report rows; `groups` maps object id -> group
+    (assets.library.object_groups), so "unseen" splits into new families and new members."""
+    from corn_drake.errors import InputError
+
+    by_group: dict[str, list[dict]] = defaultdict(list)
+    for row in episodes:
+        if row["object"] not in groups:
+            raise InputError(f"episode {row['episode']}: object {row['object']!r} has no group")
+        by_group[groups[row["object"]]].append(row)
+    return {g: {"success_rate": float(np.mean([r["success"] for r in rows])),
+                "episodes": len(rows), "objects": len({r["object"] for r in rows})}
+            for g, rows in sorted(by_group.items())}
+
+
 def run(args) -> int:
     from corn_drake.config import TeacherDiagramConfig, load_config
     from corn_drake import DIAGRAMS_DIR
@@ -132,6 +147,11 @@ def run(args) -> int:
                       out_dir)
     report.update({"run": str(args.run), "policy": policy, "split": args.split,
                    "actions": "sampled" if args.stochastic else "mean"})
+    if args.objects:
+        from corn_drake.assets.library import object_groups
+
+        groups = object_groups(args.objects)
+        report["success_by_group"] = success_by_group(report["episodes"], groups)
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")

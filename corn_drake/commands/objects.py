@@ -37,6 +37,34 @@ def output_arguments(args) -> dict:
     return recorded
 
 
+def _split_summary(objects: list[dict]) -> str:
+    """'N train + M unseen objects (k family, l member)': the unseen count by kind of novelty."""
+    from collections import Counter
+
+    splits = Counter(o["split"] for o in objects)
+    groups = Counter(o.get("unseen_group") for o in objects if o["split"] == "unseen")
+    kinds = ", ".join(f"{n} {g}" for g, n in sorted(groups.items(), key=lambda kv: str(kv[0])))
+    return (f"{splits['train']} train + {splits['unseen']} unseen objects"
+            + (f" ({kinds})" if kinds else ""))
+
+
+def _stable_pose_summary(objects: list[dict]) -> list[str]:
+    """Stable poses kept under both contact settings, overall and for each object that lost some."""
+    checked = [o for o in objects if "stable_pose_kept_fraction" in o]
+    held = sum(o["drops"]["verified"] for o in checked)
+    kept = sum(o["drops"]["held_second_setting"] for o in checked)
+    lines = [f"stable poses holding under both contact settings: {kept} of the {held} holding in "
+             f"the training setting ({kept / max(held, 1):.0%})"]
+    if len(checked) < len(objects):  # a library resumed from a build before the second setting
+        lines[0] += f"; {len(objects) - len(checked)} older objects were not checked"
+    for o in checked:
+        if o["stable_pose_kept_fraction"] < 1.0:
+            d = o["drops"]
+            lines.append(f"  {o['id']}: kept {d['held_second_setting']} of {d['verified']} "
+                         f"({o['stable_pose_kept_fraction']:.0%})")
+    return lines
+
+
 def run(args) -> int:
     from corn_drake.assets.library import build_procedural, ingest_folder
     from corn_drake.assets.process import ProcessConfig
@@ -50,9 +78,9 @@ def run(args) -> int:
             manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
         else:
             manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
-    splits = [o["split"] for o in manifest["objects"]]
-    print(f"{splits.count('train')} train + {splits.count('unseen')} unseen objects, "
-          f"{len(manifest['rejected'])} rejected; manifest {args.out}/manifest.json")
+    print(_split_summary(manifest["objects"]) + f", {len(manifest['rejected'])} rejected; "
+          f"manifest {args.out}/manifest.json")
+    print("\n".join(_stable_pose_summary(manifest["objects"])))
     for r in manifest["rejected"]:
         print(f"  rejected {r['source']}: {r['reason']}")
     return 0

@@ -17,12 +17,17 @@ from pydrake.systems.framework import DiagramBuilder
 
 from corn_drake.config import SceneConfig
 from corn_drake.scene.franka import FINGER_BODIES, add_franka
+from corn_drake.scene.friction import geometry_friction
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 
 OBJECT_NAME = "object"
 TABLE_NAME = "table"
+# Nominal frictions in the paper's (averaging) terms; the geometries get Drake's equivalents.
 DEFAULT_TABLE_FRICTION = 0.5
 DEFAULT_OBJECT_FRICTION = 0.8
+DEFAULT_FINGER_FRICTION = 1.0
+_DEFAULT_GEOMETRY_FRICTION = geometry_friction(DEFAULT_OBJECT_FRICTION, DEFAULT_TABLE_FRICTION,
+                                               DEFAULT_FINGER_FRICTION)
 
 
 @dataclasses.dataclass
@@ -93,7 +98,7 @@ def object_shapes(spec: ObjectSpec, scale: float = 1.0):
 def _add_table(plant: MultibodyPlant, cfg: SceneConfig) -> list[GeometryId]:
     size = np.asarray(cfg.table_size, float)
     X = RigidTransform([0.0, 0.0, TABLE_TOP_Z - size[2] / 2])
-    props = table_proximity_properties(cfg, DEFAULT_TABLE_FRICTION)
+    props = table_proximity_properties(cfg, _DEFAULT_GEOMETRY_FRICTION.table)
     shape = Box(*size)
     gid = plant.RegisterCollisionGeometry(plant.world_body(), X, shape, TABLE_NAME, props)
     plant.RegisterVisualGeometry(plant.world_body(), X, shape, TABLE_NAME, [0.55, 0.4, 0.3, 1.0])
@@ -105,7 +110,7 @@ def _add_object(plant: MultibodyPlant, cfg: SceneConfig, spec: ObjectSpec):
     inertia = SpatialInertia(spec.mass, spec.com, UnitInertia(*np.diag(spec.unit_inertia),
                                                                *spec.unit_inertia[[0, 0, 1], [1, 2, 2]]))
     body = plant.AddRigidBody(OBJECT_NAME, instance, inertia)
-    props = object_proximity_properties(cfg, DEFAULT_OBJECT_FRICTION)
+    props = object_proximity_properties(cfg, _DEFAULT_GEOMETRY_FRICTION.object)
     gids = []
     for i, shape in enumerate(object_shapes(spec)):
         gids.append(plant.RegisterCollisionGeometry(body, RigidTransform(), shape,

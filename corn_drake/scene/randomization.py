@@ -14,16 +14,18 @@ from pydrake.geometry import (AddRigidHydroelasticProperties, ProximityPropertie
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from corn_drake.config import RandomizationConfig
-from corn_drake.scene.builder import (DEFAULT_OBJECT_FRICTION, DEFAULT_TABLE_FRICTION, Scene,
-                                      friction_properties, object_proximity_properties, object_shapes,
+from corn_drake.scene.builder import (DEFAULT_FINGER_FRICTION, DEFAULT_OBJECT_FRICTION,
+                                      DEFAULT_TABLE_FRICTION, Scene, friction_properties,
+                                      object_proximity_properties, object_shapes,
                                       table_proximity_properties)
+from corn_drake.scene.friction import geometry_friction
 from corn_drake.scene.objects import TABLE_TOP_Z
-
-DEFAULT_FINGER_FRICTION = 1.0
 
 
 @dataclasses.dataclass
 class PhysicsSample:
+    """Sampled physics in the paper's terms: a friction here is one surface's coefficient under
+    the paper's average combination (scene/friction.py writes Drake's equivalents)."""
     mass: float
     scale: float
     object_friction: float
@@ -82,14 +84,15 @@ def apply_physics(scene: Scene, sample: PhysicsSample, root_context, current_sca
     if abs(s - current_scale) > 1e-12:
         for gid, shape in zip(scene.object_geometries, object_shapes(spec, s)):
             sg.ChangeShape(sg_ctx, source, gid, shape)
-    obj_props = object_proximity_properties(scene.config, sample.object_friction)
+    mu = geometry_friction(sample.object_friction, sample.table_friction, sample.finger_friction)
+    obj_props = object_proximity_properties(scene.config, mu.object)
     for gid in scene.object_geometries:
         sg.AssignRole(sg_ctx, source, gid, obj_props, RoleAssign.kReplace)
-    table_props = table_proximity_properties(scene.config, sample.table_friction)
+    table_props = table_proximity_properties(scene.config, mu.table)
     for gid in scene.table_geometries:
         sg.AssignRole(sg_ctx, source, gid, table_props, RoleAssign.kReplace)
     for gid in scene.finger_geometries:
-        sg.AssignRole(sg_ctx, source, gid, _rigid_props(sample.finger_friction), RoleAssign.kReplace)
+        sg.AssignRole(sg_ctx, source, gid, _rigid_props(mu.finger), RoleAssign.kReplace)
 
 
 def scaled_stable_poses(poses: np.ndarray, scale: float) -> np.ndarray:
