@@ -24,8 +24,9 @@ WINDOW = 100  # finished episodes behind the logged success rate and return
 
 
 def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """For frozen encoders, compute features once at collection time, not every PPO epoch."""
-    if agent.kind in ("corn", "pn"):
+    """For frozen encoders, compute features once at collection time, not every PPO epoch:
+    TeacherAgent.features returns obs["features"] when present."""
+    if agent.frozen_encoder:
         obs = dict(obs)
         obs["features"] = agent.features(obs)
     return obs
