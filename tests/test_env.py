@@ -208,3 +208,18 @@ def test_push_benchmark_names_the_ranges_when_no_goal_fits():
     env = TeacherEnv(cfg)
     with pytest.raises(ValueError, match="goal_x"):
         env.reset(seed=0)
+
+
+def test_a_failed_step_terminates_the_episode_with_a_valid_observation(env):
+    """A diverging state (a huge velocity: the solver fails or leaves non-finite numbers) must end the episode as terminated:
+    a truncated one would be bootstrapped from the value of a meaningless observation."""
+    env.reset(seed=3)
+    env.step(np.zeros(20))
+    v = np.full(env.scene.plant.num_velocities(env.scene.object_instance), 1e300)
+    env.scene.plant.SetVelocities(env.plant_context, env.scene.object_instance, v)
+    obs, reward, terminated, truncated, info = env.step(np.zeros(20))
+    assert terminated and not truncated and "sim_error" in info
+    assert reward == 0.0 and env.observation_space.contains(obs)
+    assert all(np.isfinite(o).all() for o in obs.values())
+    obs, _ = env.reset(seed=3)  # the env is usable again after a reset
+    assert all(np.isfinite(o).all() for o in obs.values())

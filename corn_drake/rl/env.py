@@ -229,9 +229,12 @@ class TeacherEnv(gym.Env):
             self.scene.plant.GetPositionsAndVelocities(self._plant_context)).all()
         self._steps += 1
         if not state_ok:
+            # The episode ends as terminated, not truncated: a time-out makes PPO bootstrap
+            # from V(final observation), and the state behind this one is meaningless. The
+            # zero observation only keeps the shapes; reset() before stepping again.
             info.setdefault("sim_error", "non-finite state after step")
             obs = {k: np.zeros(sp.shape, np.float32) for k, sp in self.observation_space.items()}
-            return obs, 0.0, False, True, info
+            return obs, 0.0, True, False, info
         status = self._status()
         info["status"] = status
         reward = float(self._reward_port.Eval(self.context)[0])
