@@ -15,7 +15,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from corn_drake.config import TeacherDiagramConfig
-from corn_drake.diagrams import TeacherDiagram, build_teacher_diagram, load_teacher_config
+from corn_drake.diagrams import (TeacherDiagram, build_teacher_diagram, load_teacher_config,
+                                 reseed_random_sources)
 from corn_drake.scene.franka import JOINT_LOWER, JOINT_UPPER, NUM_JOINTS
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.scene.randomization import apply_physics, sample_physics, scaled_stable_poses
@@ -185,6 +186,8 @@ class TeacherEnv(gym.Env):
         set_source("object_radius", [s * spec.radius])
         set_source("torque_noise_std", [phys.torque_noise_std])
 
+        # After the episode's draws, so a seed gives the same episode with or without noise.
+        reseed_random_sources(self.diagram, ctx, rng)
         h.ik.hold_position(h.ik.GetMyMutableContextFromRoot(ctx), q0)
         reset_previous(h.reward_hold, h.reward, ctx)
         if self._action_port is not None:
