@@ -195,6 +195,8 @@ def test_a_fixed_object_id_keeps_one_object(tmp_path):
     stats = [s for _ in range(3) for s in batch.step(np.zeros((2, 20))).episode_stats]
     assert {s["object"] for s in stats} == {"cylinder_01"} and len(stats) == 6
     assert all(a is b for a, b in zip(envs, batch.envs))  # never rebuilt
+    with pytest.raises(ValueError, match="actions: expected one row per env"):
+        batch.step(np.zeros((3, 20)))
 
 
 def test_train_cli_writes_episodes_per_object_for_every_train_object(tmp_path):

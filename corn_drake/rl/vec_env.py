@@ -157,6 +157,8 @@ class EnvBatch:
         return stack_obs([self._begin_episode(slot) for slot in range(len(self.envs))])
 
     def step(self, actions: np.ndarray) -> StepResult:
+        if len(actions) != len(self.envs):
+            raise ValueError(f"actions: expected one row per env ({len(self.envs)}), got {len(actions)}")
         obs_list, rewards = [], np.zeros(len(self.envs))
         terminated = np.zeros(len(self.envs), bool)
         truncated = np.zeros(len(self.envs), bool)
