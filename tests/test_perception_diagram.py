@@ -113,5 +113,7 @@ def test_student_noise_has_the_papers_size_in_metres_and_is_reseeded_per_episode
 def test_negative_noise_std_is_named():
     cfg = load_student_config()
     cfg.observation.goal_noise_std = -0.002
-    with pytest.raises(ValueError, match="goal_noise_std"):
+    from corn_drake.errors import InputError
+
+    with pytest.raises(InputError, match="goal_noise_std"):
         build_student_diagram(cfg)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from corn_drake.config import TeacherDiagramConfig
+from corn_drake.errors import InputError
 
 
 def cycle_object(ids: list[str], seed: int, index: int, episode: int, num_envs: int) -> str:
@@ -73,7 +74,7 @@ class EnvFactory:
 
         ids = list_objects(obj.library, "train")
         if not ids:
-            raise ValueError(f"object library {obj.library} has no train objects")
+            raise InputError(f"object library {obj.library} has no train objects")
         return ids
 
     def object_for(self, index: int, episode: int) -> str | None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from pydrake.systems.framework import LeafSystem
 
+from corn_drake.errors import InputError
 from corn_drake.scene.franka import NUM_JOINTS
 from corn_drake.systems.ik import ACTION_DIM
 
@@ -26,7 +27,7 @@ class StudentObservations(LeafSystem):
         super().__init__()
         for name, std in (("cloud_noise_std", cloud_noise_std), ("goal_noise_std", goal_noise_std)):
             if not std >= 0:  # also rejects NaN
-                raise ValueError(f"observation.{name} must be >= 0 (metres), got {std}")
+                raise InputError(f"observation.{name} must be >= 0 (metres), got {std}")
         self._cloud_std, self._goal_std = float(cloud_noise_std), float(goal_noise_std)
         n3 = 3 * num_points
         self.DeclareVectorInputPort("points", n3)
