@@ -147,6 +147,21 @@ class TeacherDiagramConfig:
 
 @dc.dataclass
 class PPOConfig:
+    """PPO settings; where each default comes from (paper = Table "Hyperparameters for PPO" of
+    the CORN paper, code = the authors' models/rl/v6/ppo.py with cloud_arm_mlp_base.yaml, see
+    shared/reference/corn_official_code.md section 4):
+
+    gamma 0.99, gae_lambda 0.95, clip 0.3, epochs 8, lr 3e-4, kl_target 0.016: paper and code.
+    kl_stop_factor 1.5: the paper's early-stopping KL target 0.024 = 1.5 x 0.016 (code: the
+    same, the first minibatch of an update exempt). lr_min 1e-6, lr_max 1e-2 and the x1.5 / /1.5
+    steps of the adaptive lr: code. minibatches 1: code (chunk_size 1, the whole rollout).
+    policy_coef 0.5, value_coef 2.0: code (k_pi 0.5, k_val 2.0, and its value loss is
+    0.5 * MSE, as ours). The paper's table prints "policy 2, value 0.5": the code's numbers
+    with the names swapped; we follow the code, which produced the paper's results.
+    bound_coef 0.02: paper and code; bound_limit 1.1 and max_grad_norm 1.0: code.
+    Entropy bonus 0 (paper and code): none is implemented.
+    """
+
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip: float = 0.3
@@ -158,7 +173,7 @@ class PPOConfig:
     kl_target: float = 0.016
     kl_stop_factor: float = 1.5
     policy_coef: float = 0.5
-    value_coef: float = 1.0  # x 0.5 * (V - R)^2, i.e. the authors' k_val 2.0 with its own 0.5
+    value_coef: float = 2.0  # x 0.5 * (V - R)^2 in PPO.losses, as the authors' k_val
     bound_coef: float = 0.02
     bound_limit: float = 1.1
     max_grad_norm: float = 1.0

@@ -96,10 +96,20 @@ class TrackerConfig:
     min_points: int = 20
 
 
+# The policy's cloud normalisation (x - (0, 0, 0.55)) / 0.4 (rl/agent.py CLOUD_SCALE): the
+# paper's observation noises are stated in those units.
+NORMALISED_UNIT_M = 0.4
+
+
 @dc.dataclass
 class StudentObservationConfig:
-    cloud_noise_std: float = 0.005  # N(0, 0.005) per coordinate, as the authors' PerturbCloud
-    goal_noise_std: float = 0.0
+    # Std of N(0, s) per cloud coordinate, in metres: the paper's N(0, 0.005) on the normalised
+    # cloud (its Table "Range for domain randomization"; the authors' PerturbCloud adds it after
+    # normalisation), i.e. 0.005 x 0.4 m = 2 mm.
+    cloud_noise_std: float = 0.005 * NORMALISED_UNIT_M
+    # Std of N(0, s) on the goal's position (its first 3 entries), in metres: the paper's
+    # N(0, 0.005) goal-pose noise on the normalised input, 2 mm. (The authors' code sets 0.)
+    goal_noise_std: float = 0.005 * NORMALISED_UNIT_M
 
 
 @dc.dataclass

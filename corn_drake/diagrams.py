@@ -15,7 +15,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from pydrake.common import RandomDistribution
+from pydrake.common import RandomDistribution, RandomGenerator
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
@@ -59,6 +59,22 @@ def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
 
         return load_object_spec(cfg.library, cfg.object_id)
     raise InputError(f"scene.object.kind must be box, cylinder or library, got {cfg.kind!r}")
+
+
+def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -> int:
+    """Draws a fresh seed from `rng` for every RandomSource in `diagram` (torque noise, the
+    student's cloud and goal noise); returns how many. Call it after restoring a default
+    context: that context holds each source's construction-time seed, so without this every
+    episode (and every Ray worker, which builds its sources in the same order) replays one noise
+    sequence. Only the sources: the diagram's own SetRandomContext would re-randomize any
+    other system that declares random state or parameters as well."""
+    count = 0
+    for system in diagram.GetSystems():
+        if isinstance(system, RandomSource):
+            system.SetRandomContext(system.GetMyMutableContextFromRoot(context),
+                                    RandomGenerator(int(rng.integers(2 ** 32))))
+            count += 1
+    return count
 
 
 def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:

@@ -2,7 +2,7 @@
 
     plant/scene graph --> 3 RgbdSensors --> DepthImageToPointCloud (x3, world frame)
         --> ObjectSegmentation (robot state for the link test) --> PoseTracker (ICP)
-        --> StudentObservations (+ RandomSource cloud noise)
+        --> StudentObservations (+ RandomSource cloud and goal noise)
 
 Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`;
 outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (7, estimated),
@@ -126,10 +126,13 @@ def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectS
                                         teacher.sources["goal_pose"].get_output_port())
     n = cfg.segmentation.num_points
     obs = builder.AddNamedSystem("student_observations", StudentObservations(
-        n, cfg.observation.cloud_noise_std))
-    noise = builder.AddNamedSystem("cloud_noise", RandomSource(
-        RandomDistribution.kGaussian, 3 * n, cfg.teacher.scene.physics.policy_period))
-    builder.Connect(noise.get_output_port(), obs.GetInputPort("unit_noise"))
+        n, cfg.observation.cloud_noise_std, cfg.observation.goal_noise_std))
+    # New samples every policy period; reseed_random_sources gives each episode fresh seeds.
+    period = cfg.teacher.scene.physics.policy_period
+    for name, size, port in (("cloud_noise", 3 * n, "cloud_unit_noise"),
+                             ("goal_noise", 3, "goal_unit_noise")):
+        noise = builder.AddNamedSystem(name, RandomSource(RandomDistribution.kGaussian, size, period))
+        builder.Connect(noise.get_output_port(), obs.GetInputPort(port))
     builder.Connect(perception.segmentation.GetOutputPort("points"), obs.GetInputPort("points"))
     builder.Connect(teacher.observations.GetOutputPort("hand_state"), obs.GetInputPort("hand_state"))
     builder.Connect(teacher.scene.plant.get_state_output_port(teacher.scene.panda),

@@ -198,3 +198,28 @@ def test_ppo_with_the_paper_settings_learns_a_reach_task():
     # The start points average ~0.77 from the origin; a policy that moves toward it at full
     # speed for 10 steps ends near 0.1.
     assert after < 0.5 * before, (before, after)
+
+
+def test_loss_weights_are_the_authors():
+    """total = k_pi * surrogate + k_val * 0.5 * MSE(value) + k_bound * bound, with the authors'
+    k_pi 0.5, k_val 2.0, k_bound 0.02 (their ppo.py), computed here independently of
+    PPO.losses on a fixed batch whose actions reach past the bound."""
+    torch.manual_seed(0)
+    policy = _FlatPolicy()
+    obs, actions, logp, adv, _ = _batch(policy, n=64)
+    returns = torch.linspace(-2.0, 3.0, 64)  # far from the untrained values: a big value term
+    with torch.no_grad():
+        policy.net.heads.actor[-1].bias.copy_(torch.tensor([1.6, -1.3, 0.2]))
+    losses = PPO(policy).losses(obs, actions, logp, adv, returns)
+    with torch.no_grad():
+        mu, value = policy(obs)
+        std = policy.log_std.exp()
+        new_logp = (-((actions - mu) ** 2) / (2 * std ** 2) - std.log()
+                    - 0.5 * torch.log(torch.tensor(2 * torch.pi))).sum(-1)
+        ratio = (new_logp - logp).exp()
+        surrogate = -torch.min(ratio * adv, ratio.clamp(0.7, 1.3) * adv).mean()
+        value_mse = ((value - returns) ** 2).mean()
+        bound = ((mu - 1.1).clamp(min=0) ** 2 + (-1.1 - mu).clamp(min=0) ** 2).sum(-1).mean()
+    assert value_mse > 1.0 and bound > 0.01  # each term weighs in the total
+    expected = 0.5 * surrogate + 2.0 * 0.5 * value_mse + 0.02 * bound
+    torch.testing.assert_close(losses["total"].detach(), expected, rtol=1e-5, atol=1e-6)

@@ -100,3 +100,172 @@ def test_ray_workers_survive_a_killed_worker():
         assert not result.truncated.any()
     finally:
         ray.shutdown()
+
+
+class _CountingEncoder(torch.nn.Module):
+    """Isolates the frozen encoder: counts its forward calls, delegates the computation."""
+
+    def __init__(self, encoder):
+        super().__init__()
+        self.encoder, self.calls = encoder, 0
+
+    def forward(self, cloud, hand):
+        self.calls += 1
+        return self.encoder(cloud, hand)
+
+
+def test_frozen_encoder_runs_once_per_observation_batch_and_never_in_the_update(tmp_path):
+    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.ppo import compute_gae
+
+    cfg = TrainConfig(policy="corn", total_steps=8, envs_per_worker=2, rollout_steps=4)
+    cfg.env.task.episode_steps = 3  # episodes end inside the rollout: final values are needed
+    counter = _CountingEncoder(make_encoder("corn"))
+    trainer = Trainer(cfg, tmp_path, counter)
+    buf, last_values, _, _, _ = trainer._collect(trainer.envs.reset())
+    ended = torch.stack([a.bool() | b.bool() for a, b in zip(buf["terminated"], buf["truncated"])])
+    assert ended.any(dim=1).sum() >= 1
+    # One call per rollout step, one per step where episodes ended (their final observations),
+    # one for the value after the rollout.
+    assert counter.calls == cfg.rollout_steps + int(ended.any(dim=1).sum()) + 1
+    stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
+    adv, ret = compute_gae(stack["rewards"], stack["values"], stack["terminated"],
+                           stack["truncated"], stack["final_values"], last_values, 0.99, 0.95)
+    flat_obs = {k: torch.cat([o[k] for o in buf["obs"]]) for k in buf["obs"][0]}
+    counter.calls = 0
+    stats = trainer.ppo.update(flat_obs, stack["actions"].flatten(0, 1), stack["logp"].flatten(0, 1),
+                               adv.flatten(), ret.flatten())
+    assert stats["minibatches"] >= 1 and counter.calls == 0
+
+
+def _library_config(library, episode_steps):
+    cfg = TeacherDiagramConfig()
+    cfg.scene.object.kind, cfg.scene.object.library = "library", str(library)
+    cfg.task.episode_steps = episode_steps
+    return cfg
+
+
+def test_envs_move_through_every_train_object(tmp_path):
+    from corn_drake.assets.library import list_objects
+    from corn_drake.rl.vec_env import EnvBatch
+    from tests.fixtures import write_loadable_library
+
+    library = write_loadable_library(tmp_path / "lib", num_train=10)
+    train_ids = list_objects(library, "train")
+    batch = EnvBatch(EnvFactory(_library_config(library, episode_steps=2), seed=0), num_envs=4)
+    batch.reset()
+    episodes, first_poses = [], []
+    for _ in range(6):  # 3 episodes per env
+        result = batch.step(np.zeros((4, 20)))
+        episodes += result.episode_stats
+        first_poses += [batch.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+    assert len(episodes) == 12 and {e["object"] for e in episodes} == set(train_ids)
+    for _ in range(18):  # into the second round of objects
+        batch.step(np.zeros((4, 20)))
+    # Switching reuses the envs built for each object (pydrake never frees a discarded
+    # diagram): about one per object, not one per episode (4 + 48 here).
+    assert batch.built <= len(train_ids) + 4
+    # No env repeats an object within a round of len(train_ids) episodes, and envs at the same
+    # episode count hold different objects.
+    per_env = [[batch.factory.object_for(i, k) for k in range(10)] for i in range(4)]
+    assert all(sorted(objects) == sorted(train_ids) for objects in per_env)
+    assert all(len({per_env[i][k] for i in range(4)}) == 4 for k in range(10))
+    # The schedule and the episodes are seeded: a second batch replays them exactly.
+    again = EnvBatch(EnvFactory(_library_config(library, episode_steps=2), seed=0), num_envs=4)
+    again.reset()
+    replay, replay_poses = [], []
+    for _ in range(6):
+        result = again.step(np.zeros((4, 20)))
+        replay += result.episode_stats
+        replay_poses += [again.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+    assert [e["object"] for e in replay] == [e["object"] for e in episodes]
+    np.testing.assert_allclose(replay_poses, first_poses)
+
+
+def test_a_fixed_object_id_keeps_one_object(tmp_path):
+    from corn_drake.rl.vec_env import EnvBatch
+    from tests.fixtures import write_loadable_library
+
+    library = write_loadable_library(tmp_path / "lib", num_train=3)
+    cfg = _library_config(library, episode_steps=1)
+    cfg.scene.object.object_id = "cylinder_01"
+    batch = EnvBatch(EnvFactory(cfg, seed=0), num_envs=2)
+    batch.reset()
+    envs = list(batch.envs)
+    stats = [s for _ in range(3) for s in batch.step(np.zeros((2, 20))).episode_stats]
+    assert {s["object"] for s in stats} == {"cylinder_01"} and len(stats) == 6
+    assert all(a is b for a, b in zip(envs, batch.envs))  # never rebuilt
+    with pytest.raises(ValueError, match="actions: expected one row per env"):
+        batch.step(np.zeros((3, 20)))
+
+
+def test_train_cli_writes_episodes_per_object_for_every_train_object(tmp_path):
+    """A tiny `train` over a 6-object library (plus one unseen) trains on all six, and a resume
+    keeps counting from the checkpoint."""
+    from corn_drake.assets.library import list_objects
+    from tests.fixtures import write_loadable_library
+
+    library = write_loadable_library(tmp_path / "lib", num_train=6)
+    out = tmp_path / "run"
+
+    def train(steps):
+        cmd = [sys.executable, "-m", "corn_drake.cli", "train", "--policy", "state",
+               "--objects", str(library), "--steps", str(steps), "--envs-per-worker", "2",
+               "--rollout-steps", "8", "--episode-steps", "3", "--out", str(out), "--no-progress"]
+        subprocess.run(cmd, check=True, capture_output=True)
+        return json.loads((out / "metrics.json").read_text())
+
+    first = train(32)["episodes_per_object"]
+    assert set(first) == set(list_objects(library, "train"))  # every train object, no unseen one
+    resumed = train(64)
+    counts = resumed["episodes_per_object"]
+    assert all(counts[o] >= n for o, n in first.items())
+    assert sum(counts.values()) == sum(first.values()) + sum(
+        h["episodes"] for h in resumed["history"][len(resumed["history"]) // 2:])
+
+
+def test_a_failed_simulation_step_ends_the_episode_without_bootstrap(tmp_path):
+    from corn_drake.rl.ppo import compute_gae
+
+    trainer = Trainer(_small_cfg(64), tmp_path)
+    obs = trainer.envs.reset()
+    env = trainer.envs.envs[0]
+    # A huge object velocity makes the next step fail (the solver or a non-finite state).
+    n_v = env.scene.plant.num_velocities(env.scene.object_instance)
+    env.scene.plant.SetVelocities(env.plant_context, env.scene.object_instance, np.full(n_v, 1e300))
+    buf, last_values, _, episodes, sim_errors = trainer._collect(obs)
+    assert sim_errors == 1
+    assert [e["sim_error"] for e in episodes] == [True] and episodes[0]["length"] == 1
+    assert buf["terminated"][0].tolist() == [1.0, 0.0] and buf["truncated"][0].tolist() == [0.0, 0.0]
+    stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
+    adv, _ = compute_gae(stack["rewards"], stack["values"], stack["terminated"], stack["truncated"],
+                         stack["final_values"], last_values, 0.99, 0.95)
+    # Ended, not cut: the advantage is the reward minus the value, nothing bootstrapped after.
+    torch.testing.assert_close(adv[0, 0], stack["rewards"][0, 0] - stack["values"][0, 0])
+
+
+def test_ray_workers_share_the_object_rounds_of_an_in_process_batch(tmp_path):
+    """Workers' envs take their global index and the total env count: 2 workers x 2 envs run
+    the same objects and episodes as one in-process batch of 4."""
+    ray = pytest.importorskip("ray")
+    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.vec_env import EnvBatch
+    from tests.fixtures import write_loadable_library
+
+    factory = EnvFactory(_library_config(write_loadable_library(tmp_path / "lib", 4), 1), seed=3)
+
+    def run(batch):
+        first = batch.reset()
+        stats = [s for _ in range(3) for s in batch.step(np.zeros((4, 20))).episode_stats]
+        return first["goal"], [(s["object"], s["return"]) for s in stats]
+
+    goal, local = run(EnvBatch(factory, 4))
+    assert {o for o, _ in local} == set(factory.train_objects)
+    init_ray(num_cpus=2)
+    try:
+        remote_goal, remote = run(RayEnvBatch(factory, num_workers=2, envs_per_worker=2))
+    finally:
+        ray.shutdown()
+    np.testing.assert_allclose(remote_goal, goal)
+    assert [o for o, _ in remote] == [o for o, _ in local]
+    np.testing.assert_allclose([r for _, r in remote], [r for _, r in local], rtol=1e-9)

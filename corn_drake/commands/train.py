@@ -51,7 +51,7 @@ def run(args) -> int:
     env_cfg = load_teacher_config(args.config)
     if args.episode_steps:
         env_cfg.task.episode_steps = args.episode_steps
-    if args.objects:  # every train object of the library, one per env (cycling)
+    if args.objects:  # every train object of the library: each env takes a new one every episode
         env_cfg.scene.object.kind = "library"
         env_cfg.scene.object.library = args.objects
         env_cfg.scene.object.object_id = ""

@@ -53,7 +53,7 @@ class TeacherAgent(nn.Module):
             raise ValueError(f"policy {kind!r} needs an encoder")
         self.kind = kind
         self.encoder = encoder
-        if encoder is not None and kind in ("corn", "pn"):
+        if encoder is not None and self.frozen_encoder:
             encoder.eval()
             for p in encoder.parameters():
                 p.requires_grad_(False)
@@ -70,6 +70,11 @@ class TeacherAgent(nn.Module):
         # None: act() returns the Gaussian mean (evaluation's default). A generator: act()
         # samples from the policy, as during training (`corn-drake evaluate --stochastic`).
         self.action_noise: torch.Generator | None = None
+
+    @property
+    def frozen_encoder(self) -> bool:
+        """True for corn / pn: PPO never trains the encoder, so its features can be cached."""
+        return self.kind in ("corn", "pn")
 
     def update_normalizer(self, context: torch.Tensor) -> None:
         x = context.detach().to(torch.float64).reshape(-1, CONTEXT_DIM)
@@ -90,6 +95,10 @@ class TeacherAgent(nn.Module):
             # without it the state policy would have to learn the arm's kinematics from joints.
             keypoints = normalize_points(obs["object_keypoints"].reshape(-1, 8, 3)).flatten(1)
             return torch.cat([keypoints, normalize_hand(obs["hand_state"])], dim=-1)
+        if self.frozen_encoder and "features" in obs:
+            # Precomputed at collection time (rl/trainer.py): a frozen encoder would give the
+            # same features again, and skipping it makes every PPO epoch much cheaper.
+            return obs["features"]
         cloud, hand = normalize_points(obs["cloud"]), normalize_hand(obs["hand_state"])
         if self.kind == "e2e":
             return self.encoder(cloud, hand)

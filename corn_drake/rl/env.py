@@ -15,7 +15,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from corn_drake.config import TeacherDiagramConfig
-from corn_drake.diagrams import TeacherDiagram, build_teacher_diagram, load_teacher_config
+from corn_drake.diagrams import (TeacherDiagram, build_teacher_diagram, load_teacher_config,
+                                 reseed_random_sources)
 from corn_drake.scene.franka import JOINT_LOWER, JOINT_UPPER, NUM_JOINTS
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.scene.randomization import apply_physics, sample_physics, scaled_stable_poses
@@ -185,6 +186,8 @@ class TeacherEnv(gym.Env):
         set_source("object_radius", [s * spec.radius])
         set_source("torque_noise_std", [phys.torque_noise_std])
 
+        # After the episode's draws, so a seed gives the same episode with or without noise.
+        reseed_random_sources(self.diagram, ctx, rng)
         h.ik.hold_position(h.ik.GetMyMutableContextFromRoot(ctx), q0)
         reset_previous(h.reward_hold, h.reward, ctx)
         if self._action_port is not None:
@@ -229,9 +232,12 @@ class TeacherEnv(gym.Env):
             self.scene.plant.GetPositionsAndVelocities(self._plant_context)).all()
         self._steps += 1
         if not state_ok:
+            # The episode ends as terminated, not truncated: a time-out makes PPO bootstrap
+            # from V(final observation), and the state behind this one is meaningless. The
+            # zero observation only keeps the shapes; reset() before stepping again.
             info.setdefault("sim_error", "non-finite state after step")
             obs = {k: np.zeros(sp.shape, np.float32) for k, sp in self.observation_space.items()}
-            return obs, 0.0, False, True, info
+            return obs, 0.0, True, False, info
         status = self._status()
         info["status"] = status
         reward = float(self._reward_port.Eval(self.context)[0])

@@ -9,7 +9,9 @@ lines here are easier to read and test.
 Settings (PPOConfig defaults): gamma 0.99, lambda 0.95, clip 0.3, 8 epochs, lr 3e-4 adapted to
 a KL target 0.016 (x1.5 below half, /1.5 above twice the target, bounded to [1e-6, 1e-2]), early
 stop when the approximate KL exceeds 1.5 x target (the first minibatch of an update always
-steps), bound-loss coefficient 0.02, gradient clip 1.0, no entropy bonus.
+steps), loss 0.5 x surrogate + 2.0 x (0.5 x value MSE) + 0.02 x bound loss (the authors'
+k_pi, k_val, k_bound), gradient clip 1.0, no entropy bonus. PPOConfig's docstring says
+which numbers are the paper's and which the authors' code's.
 """
 
 from __future__ import annotations

@@ -8,6 +8,8 @@ start new episodes, the step reports them as truncated with no bootstrap (final_
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import ray
 
@@ -75,6 +77,8 @@ def _start_reaper(pids: list[int]) -> None:
 
 class RayEnvBatch:
     def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int):
+        if not factory.num_envs:  # every worker's envs share the object rounds
+            factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
         self.factory, self.envs_per_worker = factory, envs_per_worker
         self.workers = [self._spawn(w) for w in range(num_workers)]
         self.restarts = 0

@@ -3,7 +3,9 @@
 Run folder layout: config.yaml, checkpoints/last.pt (atomic; the one before it kept as prev.pt),
 tb/ (TensorBoard), metrics.json, plots/learning_curve.png. A killed run resumes from
 checkpoints/last.pt (prev.pt if last.pt is unreadable) at the same update with the same
-optimizer, normalisers and RNG state (environments start fresh episodes).
+optimizer, normalisers and RNG state (environments start fresh episodes, continuing the rounds
+over the library's train objects). metrics.json's episodes_per_object counts the finished
+training episodes of each object over the whole run.
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "up
 
 
 def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """For frozen encoders, compute features once at collection time, not every PPO epoch."""
-    if agent.kind in ("corn", "pn"):
+    """For frozen encoders, compute features once at collection time, not every PPO epoch:
+    TeacherAgent.features returns obs["features"] when present."""
+    if agent.frozen_encoder:
         obs = dict(obs)
         obs["features"] = agent.features(obs)
     return obs
@@ -48,20 +51,27 @@ class Trainer:
         self.ppo = PPO(self.agent, cfg.ppo)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         self.reward_scaler = RewardScaler(n_envs, cfg.ppo.gamma)
-        factory = EnvFactory(cfg.env, cfg.seed)
-        if cfg.workers > 0:
-            from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
-
-            init_ray(cfg.ray_address or None)
-            self.envs = RayEnvBatch(factory, cfg.workers, cfg.envs_per_worker)
-        else:
-            self.envs = EnvBatch(factory, cfg.envs_per_worker)
         self.global_step, self.update_index, self.history = 0, 0, []
         # The last 100 finished episodes behind the logged success rate and return; kept in the
         # checkpoint so a resumed run's curves continue instead of restarting from zero.
         self.recent_episodes: list[dict] = []
+        # Finished training episodes per object id over the whole run (checkpointed).
+        self.episodes_per_object: dict[str, int] = {}
         self.checkpoint_path = self.out / "checkpoints" / "last.pt"
         self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
+        self.envs = self._make_envs(n_envs)
+
+    def _make_envs(self, n_envs: int):
+        cfg = self.cfg
+        # A resumed run's envs continue the object rounds where the run stopped (on average).
+        start = sum(self.episodes_per_object.values()) // n_envs
+        factory = EnvFactory(cfg.env, cfg.seed, num_envs=n_envs, start_episode=start)
+        if cfg.workers > 0:
+            from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+
+            init_ray(cfg.ray_address or None)
+            return RayEnvBatch(factory, cfg.workers, cfg.envs_per_worker)
+        return EnvBatch(factory, cfg.envs_per_worker)
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -69,6 +79,7 @@ class Trainer:
                  "reward_scaler": self.reward_scaler.state_dict(),
                  "global_step": self.global_step, "update_index": self.update_index,
                  "history": self.history, "recent_episodes": self.recent_episodes,
+                 "episodes_per_object": self.episodes_per_object,
                  "torch_rng": torch.get_rng_state(),
                  "generator": self.generator.get_state(),
                  "np_rng": self.np_rng.bit_generator.state, "policy": self.cfg.policy}
@@ -87,6 +98,7 @@ class Trainer:
         self.global_step, self.update_index = state["global_step"], state["update_index"]
         self.history = state["history"]
         self.recent_episodes = state.get("recent_episodes", [])  # absent in older checkpoints
+        self.episodes_per_object = state.get("episodes_per_object", {})  # likewise
         torch.set_rng_state(state["torch_rng"])
         self.generator.set_state(state["generator"])
         self.np_rng.bit_generator.state = state["np_rng"]
@@ -150,6 +162,7 @@ class Trainer:
             self.global_step += steps
             self.update_index += 1
             self.recent_episodes = recent = (self.recent_episodes + episodes)[-WINDOW:]
+            count_episodes_per_object(self.episodes_per_object, episodes)
             row = {"step": self.global_step, "update": self.update_index,
                    "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],
                    "lr": stats["lr"], "early_stop": stats["early_stop"],
@@ -180,10 +193,17 @@ class Trainer:
         bar.close()
         metrics = {"policy": cfg.policy, "global_step": self.global_step,
                    "updates": self.update_index, "final": self.history[-1] if self.history else {},
+                   "episodes_per_object": dict(sorted(self.episodes_per_object.items())),
                    "history": self.history}
         write_json(self.out / "metrics.json", metrics)
         plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics
+
+
+def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> None:
+    """Adds finished episodes (EnvBatch episode stats) to `counts`, object id -> episodes."""
+    for episode in episodes:
+        counts[episode["object"]] = counts.get(episode["object"], 0) + 1
 
 
 def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
