@@ -190,6 +190,9 @@ class TrainConfig:
     checkpoint_every: int = 5  # updates
     ray_address: str = ""
     encoder: str = ""  # frozen encoder checkpoint for corn / pn
+    # Train on an encoder whose recorded contact F1 is below rl/encoders.MIN_CONTACT_F1 (the
+    # demo's tiny pretraining, smoke tests); recorded so evaluate accepts the run too.
+    allow_weak_encoder: bool = False
     # Initial log-std of the Gaussian policy: 0 as in the paper; the reduced benchmark starts
     # lower, since at std 1 every step jitters the hand by most of max_position_delta and a
     # run of a few 100k steps cannot shrink it (Adam moves it ~lr per optimiser step).

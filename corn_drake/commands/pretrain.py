@@ -1,10 +1,12 @@
 """`corn-drake pretrain`: contact pretraining of the CORN encoder and/or the PointNet baseline.
 
 With --model both, CORN and PointNet are trained on the same data and batch, in OUT/corn and
-OUT/pointnet, for the same number of steps (--pointnet-budget steps) or the same optimisation
-wall-clock (--pointnet-budget time: CORN's recorded train_seconds divided by PointNet's measured
-seconds per step; PointNet is ~20x slower per step on a CPU, so equal steps do not fit a session); OUT/metrics.json holds CORN's metrics with PointNet's under
-"pointnet", and OUT/encoder.pt is the frozen CORN encoder for `corn-drake train --policy corn`.
+OUT/pointnet for the same number of steps (--pointnet-budget steps, the paper's protocol), or in
+OUT/pointnet_equal_time for the same optimisation wall-clock (--pointnet-budget time: CORN's
+recorded train_seconds divided by PointNet's measured seconds per step; PointNet is ~10x slower
+per step on a CPU). The two PointNet runs are separate rows, never one folder: OUT/metrics.json
+holds CORN's metrics with each PointNet run's under its folder name, and OUT/encoder.pt is the
+frozen CORN encoder for `corn-drake train --policy corn`.
 OUT is locked while the command runs; resuming refuses changed arguments (see RESUME_MAY_GROW).
 """
 
@@ -58,16 +60,15 @@ def _pretrain(args, out: Path) -> int:
 
     models = ["corn", "pointnet"] if args.model == "both" else [args.model]
     results = {}
-    budget = {"kind": "steps"}
     for model in models:
-        steps = args.steps
+        steps, budget = args.steps, {"kind": "steps"}
         if model == "pointnet" and args.pointnet_steps:
             steps = args.pointnet_steps
             budget = {"kind": "steps_given"}
         elif model == "pointnet" and args.pointnet_budget == "time" and "corn" in results:
             from corn_drake.contact.pretrain import seconds_per_step
 
-            previous = out / model / "config.yaml"
+            previous = out / "pointnet_equal_time" / "config.yaml"
             per_step = seconds_per_step("pointnet", args.batch_size)
             steps = max(1, round(results["corn"]["train_seconds"] / per_step))
             if previous.exists():  # resuming: keep the step count the run started with
@@ -82,23 +83,26 @@ def _pretrain(args, out: Path) -> int:
         cfg = PretrainConfig(model=model, steps=steps, batch_size=args.batch_size, **extra,
                              warmup_steps=min(100, max(steps // 10, 1)), eval_every=args.eval_every,
                              checkpoint_every=args.eval_every, seed=args.seed)
-        run_dir = out / model
+        # The equal-time PointNet is its own labelled row: it must never resume, or be mistaken
+        # for, the equal-steps one.
+        label = "pointnet_equal_time" if budget["kind"] == "equal_wall_clock" else model
+        run_dir = out / label
         # Refusals (other arguments, an unreadable checkpoint) come before the first write.
         refuse_changed_config(run_dir, run_dir / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
                               ignore=RESUME_MAY_CHANGE, name=argument_of_field)
         pretrainer = Pretrainer(cfg, args.data, run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
         write_text(run_dir / "config.yaml", yaml_dump_typed(cfg))
-        results[model] = pretrainer.train(progress=not args.no_progress)
-        print(f"{model}: unseen patch accuracy {results[model].get('unseen_patch_accuracy', float('nan')):.3f}, "
-              f"F1 {results[model].get('unseen_patch_f1', float('nan')):.3f}")
+        results[label] = {**pretrainer.train(progress=not args.no_progress), "budget": budget}
+        print(f"{label}: unseen patch accuracy "
+              f"{results[label].get('unseen_patch_accuracy', float('nan')):.3f}, "
+              f"F1 {results[label].get('unseen_patch_f1', float('nan')):.3f}")
     merged_path = out / "metrics.json"
     merged = json.loads(merged_path.read_text()) if merged_path.exists() else {}
     if "corn" in results:
-        merged.update(results["corn"])
+        merged.update({k: v for k, v in results.pop("corn").items() if k != "budget"})
         shutil.copyfile(out / "corn" / "encoder.pt", out / "encoder.pt")
-    if "pointnet" in results:
-        merged["pointnet"] = {**results["pointnet"], "budget": budget}
+    merged.update(results)  # "pointnet" and/or "pointnet_equal_time", each with its budget
     write_json(merged_path, merged)
     print(f"wrote {merged_path}")
     return 0

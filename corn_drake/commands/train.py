@@ -20,6 +20,9 @@ def add_arguments(parser):
     parser.add_argument("--policy", choices=("corn", "e2e", "state", "pn"), default="state")
     parser.add_argument("--objects", default="", help="object library folder (default: the YAML's object)")
     parser.add_argument("--encoder", default="", help="pretrained encoder checkpoint (corn, pn)")
+    parser.add_argument("--allow-weak-encoder", action="store_true",
+                        help="accept an --encoder whose pretraining contact F1 is below 0.8 "
+                             "(or unrecorded), with a warning")
     parser.add_argument("--steps", type=positive_int, default=20_000,
                         help="total environment steps")
     parser.add_argument("--workers", type=nonnegative_int, default=0,
@@ -62,7 +65,8 @@ def run(args) -> int:
     cfg = TrainConfig(policy=args.policy, total_steps=args.steps, workers=args.workers,
                       envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
                       seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,
-                      init_log_std=args.init_log_std, env=env_cfg)
+                      init_log_std=args.init_log_std, allow_weak_encoder=args.allow_weak_encoder,
+                      env=env_cfg)
     cfg.ppo.minibatches = args.minibatches
     cfg.ppo = ppo_overrides(cfg.ppo, args.ppo)
     out = Path(args.out)
@@ -71,7 +75,7 @@ def run(args) -> int:
         # run as it was (its config.yaml is what `evaluate` rebuilds the policy from).
         refuse_changed_config(out, out / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
                               ignore=RESUME_MAY_CHANGE, name=argument_of_field)
-        encoder = load_encoder(cfg.policy, cfg.encoder)
+        encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
         trainer = Trainer(cfg, out, encoder)  # reads (and checks) the checkpoint, writes nothing
         save_config(cfg, out / "config.yaml")
         metrics = trainer.train(progress=not args.no_progress)
@@ -88,6 +92,7 @@ RESUME_MAY_CHANGE = ("ray_address", "checkpoint_every")
 _FIELD_ARGUMENTS = {"policy": "--policy", "total_steps": "--steps", "workers": "--workers",
                     "envs_per_worker": "--envs-per-worker", "rollout_steps": "--rollout-steps",
                     "seed": "--seed", "encoder": "--encoder", "init_log_std": "--init-log-std",
+                    "allow_weak_encoder": "--allow-weak-encoder",
                     "ppo.minibatches": "--minibatches",
                     "env.task.episode_steps": "--episode-steps (or --config task.episode_steps)"}
 

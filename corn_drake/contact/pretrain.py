@@ -213,7 +213,7 @@ class Pretrainer:
                 metrics[f"{prefix}_patch_{k}"] = v
         write_json(self.out / "metrics.json", metrics)
         encoder = self.model.encoder
-        save_encoder(self.out / "encoder.pt", cfg.model, encoder)
+        save_encoder(self.out / "encoder.pt", cfg.model, encoder, pretraining=metrics)
         plot_predictions(self, self.out / "plots" / "predictions.png")
         return metrics
 

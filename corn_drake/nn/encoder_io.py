@@ -24,9 +24,13 @@ def make_encoder(kind: str) -> nn.Module:
     raise ValueError(f"unknown encoder kind {kind!r}")
 
 
-def save_encoder(path: str | Path, kind: str, encoder: nn.Module) -> None:
+def save_encoder(path: str | Path, kind: str, encoder: nn.Module,
+                 pretraining: dict | None = None) -> None:
+    """`pretraining` records how the encoder was made (steps, budget, held-out/unseen patch
+    metrics): policies check it, so an encoder that never learned contact is not used unawares."""
     with atomic_path(path) as tmp:
-        torch.save({"kind": kind, "state_dict": encoder.state_dict()}, tmp)
+        torch.save({"kind": kind, "state_dict": encoder.state_dict(),
+                    "pretraining": pretraining}, tmp)
 
 
 def load_frozen_encoder(path: str | Path) -> nn.Module:
@@ -42,6 +46,8 @@ def load_frozen_encoder(path: str | Path) -> nn.Module:
     # of something else on its keys or its kind.
     except (KeyError, TypeError, ValueError, RuntimeError, EOFError, pickle.UnpicklingError) as e:
         raise InputError(f"encoder checkpoint {path} is not a saved encoder ({e})") from e
+    # None for encoders exported before the record existed.
+    encoder.pretraining = state.get("pretraining")
     encoder.eval()
     for p in encoder.parameters():
         p.requires_grad_(False)

@@ -18,7 +18,7 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
     if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
-    agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder))
+    agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder))
     agent.load_state_dict(state["agent"])
     agent.eval()
     return cfg, agent
