@@ -78,14 +78,21 @@ def read_json(path: str | os.PathLike, what: str) -> Any:
 
 
 def ensure_writable(folder: str | os.PathLike, argument: str) -> Path:
-    """Creates `folder` and proves a file can be written there, before any long work whose
-    result would go there; an InputError names `argument` and the folder otherwise."""
+    """Proves that `folder` can be made and written, before any long work whose result would go
+    there; an InputError names `argument` and the folder otherwise.
+
+    Nothing is left behind: the probe file goes in the nearest folder that already exists (being
+    able to write there is what creating the rest of the path needs), and is removed again."""
     from corn_drake.errors import InputError
 
     folder = Path(folder)
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".write_probe.", dir=folder)
+        if not existing.is_dir():
+            raise NotADirectoryError(f"{existing} is not a folder")
+        fd, probe = tempfile.mkstemp(prefix=".write_probe.", dir=existing)
         os.close(fd)
         os.unlink(probe)
     except OSError as e:

@@ -33,6 +33,8 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
     """Creates `folder` and holds its lock for the duration of the block (InputError if another
     process holds it, or if the folder cannot be written)."""
     folder = Path(folder)
+    existed = folder.is_dir()
+    before = set(os.listdir(folder)) if existed else set()
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
@@ -49,8 +51,24 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         yield folder
+    except BaseException:
+        _undo_bookkeeping(folder, existed, before)
+        raise
     finally:
         os.close(fd)  # closing the only descriptor releases the flock
+
+
+def _undo_bookkeeping(folder: Path, existed: bool, before: set[str]) -> None:
+    """A command that failed before writing any output leaves the folder as it found it: the
+    lock file and argument record it added go, and so does the folder if it made it. Once real
+    output exists, everything stays (the record is what a resume is checked against)."""
+    added = set(os.listdir(folder)) - before
+    if not added or not added <= {LOCK_NAME, ARGUMENTS_NAME}:
+        return
+    for name in added:
+        (folder / name).unlink(missing_ok=True)
+    if not existed:
+        folder.rmdir()
 
 
 def changed_arguments(recorded: Mapping[str, Any], requested: Mapping[str, Any], *,

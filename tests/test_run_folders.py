@@ -193,6 +193,11 @@ def test_every_writing_command_refuses_a_locked_folder(tmp_path, capsys, command
         assert holder.stdout.readline().strip() == "locked"
         before = _files(out)
         lib = write_tiny_library(tmp_path / "lib")
+        if command == "pretrain":  # its data is checked before the lock: give it real data
+            from corn_drake.contact.runner import generate_dataset
+
+            generate_dataset(lib, tmp_path / "data", num_samples=64, seed=0, eval_samples=32,
+                             shard_size=64, progress=False)
         argv = {"pretrain": ["--data", str(tmp_path / "data"), "--steps", "2"],
                 "contact-data": ["--objects", str(lib), "--num-samples", "64"],
                 "objects": ["--num", "1", "--drops", "8"]}[command]
@@ -316,3 +321,22 @@ def _running(process) -> bool:
         return process.is_running() and process.status() != psutil.STATUS_ZOMBIE
     except psutil.Error:
         return False
+
+
+def test_a_failure_before_any_output_leaves_no_trace_but_one_after_keeps_the_record(tmp_path):
+    from corn_drake.run_folder import resume_arguments
+
+    fresh = tmp_path / "fresh"
+    with pytest.raises(RuntimeError):
+        with lock_folder(fresh):
+            resume_arguments(fresh, {"--seed": 0})
+            raise RuntimeError("bad input found after the lock")
+    assert not fresh.exists()  # the folder it made is gone with its bookkeeping
+    started = tmp_path / "started"
+    with pytest.raises(RuntimeError):
+        with lock_folder(started):
+            resume_arguments(started, {"--seed": 0})
+            (started / "shard_0.npz").write_bytes(b"partial output")
+            raise RuntimeError("killed mid-way")
+    # Real output exists: the argument record stays, so a resume is checked against it.
+    assert (started / "arguments.json").is_file() and (started / "shard_0.npz").is_file()
