@@ -15,14 +15,13 @@ Two guards keep a folder's contents from one coherent job:
 from __future__ import annotations
 
 import fcntl
-import json
 import os
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from corn_drake.errors import InputError
-from corn_drake.io_utils import write_json
+from corn_drake.io_utils import read_json, write_json
 
 LOCK_NAME = ".lock"
 ARGUMENTS_NAME = "arguments.json"
@@ -109,11 +108,7 @@ def read_recorded_arguments(folder: str | os.PathLike) -> dict | None:
     path = Path(folder) / ARGUMENTS_NAME
     if not path.is_file():
         return None
-    try:
-        recorded = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"{path}: unreadable ({e}); delete it only if you know the folder's "
-                         "arguments match") from e
+    recorded = read_json(path, "recorded arguments")
     if not isinstance(recorded, dict):
         raise InputError(f"{path}: expected a JSON object of arguments")
     return recorded

@@ -12,7 +12,6 @@ OUT is locked while the command runs; resuming refuses changed arguments (see RE
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from pathlib import Path
@@ -54,7 +53,7 @@ def run(args) -> int:
 def _pretrain(args, out: Path) -> int:
     from corn_drake.config import PretrainConfig
     from corn_drake.contact.pretrain import Pretrainer
-    from corn_drake.io_utils import write_json, write_text
+    from corn_drake.io_utils import read_json, write_json, write_text
     from corn_drake.run_folder import refuse_changed_config
     from pydrake.common.yaml import yaml_dump_typed
 
@@ -98,7 +97,7 @@ def _pretrain(args, out: Path) -> int:
               f"{results[label].get('unseen_patch_accuracy', float('nan')):.3f}, "
               f"F1 {results[label].get('unseen_patch_f1', float('nan')):.3f}")
     merged_path = out / "metrics.json"
-    merged = json.loads(merged_path.read_text()) if merged_path.exists() else {}
+    merged = read_json(merged_path, "pretraining metrics") if merged_path.exists() else {}
     if "corn" in results:
         merged.update({k: v for k, v in results.pop("corn").items() if k != "budget"})
         shutil.copyfile(out / "corn" / "encoder.pt", out / "encoder.pt")
