@@ -90,6 +90,8 @@ class ControllerConfig:
 
 @dc.dataclass
 class TaskConfig:
+    # The task's name, reported by `evaluate` and in a run's config (diagrams/tasks/NAME.yaml).
+    name: str = "full6d"
     episode_steps: int = 300
     success_position: float = 0.05  # planar xy error, m
     success_orientation: float = 0.1  # rad

@@ -17,10 +17,9 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from corn_drake.config import ControllerConfig
+from corn_drake.contract import ACTION_DIM, check_action  # noqa: F401 (check_action re-exported)
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame
 from corn_drake.timing import PolicyClock
-
-ACTION_DIM = 20
 
 
 class ActionScaling:
@@ -36,15 +35,6 @@ class ActionScaling:
 
     def to_physical(self, action: np.ndarray) -> np.ndarray:
         return self.center + self.half_range * np.clip(action, -1.0, 1.0)
-
-
-def check_action(action: np.ndarray) -> np.ndarray:
-    action = np.asarray(action, dtype=float).reshape(-1)
-    if action.shape != (ACTION_DIM,):
-        raise ValueError(f"action must have {ACTION_DIM} values, got shape {action.shape}")
-    if not np.isfinite(action).all():
-        raise ValueError(f"action has non-finite entries at {np.flatnonzero(~np.isfinite(action)).tolist()}")
-    return action
 
 
 class ActionToJointTargets(LeafSystem):
