@@ -21,6 +21,7 @@ from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroO
 
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
+from corn_drake.contract import ACTION_DIM
 from corn_drake.errors import InputError
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
@@ -155,24 +156,35 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
 
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
-                          meshcat=None, agent=None) -> TeacherDiagram:
+                          meshcat=None, agent=None, stochastic_policy: bool = False) -> TeacherDiagram:
     """The teacher rollout diagram; the action is the exported input `controller.action`.
 
     With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
-    (the evaluation diagram, diagrams/evaluation.yaml) and there is no action input.
+    (the evaluation diagram, diagrams/evaluation.yaml) and there is no action input. With
+    `stochastic_policy`, it samples its actions: a RandomSource named "policy_noise" feeds it
+    N(0, 1) draws, a fresh one every policy period (reseed_random_sources seeds it per episode).
     """
+    from corn_drake.systems.policy import PolicySystem, SampledActions
+
+    if isinstance(agent, SampledActions):
+        agent, stochastic_policy = agent.agent, True
+    if stochastic_policy and agent is None:
+        raise ValueError("stochastic_policy needs an agent: without one the action is an input")
     cfg = cfg or load_teacher_config()
     builder = DiagramBuilder()
     handles = add_teacher_systems(builder, cfg, spec)
     if agent is None:
         builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
     else:
-        from corn_drake.systems.policy import PolicySystem
-
-        policy = builder.AddNamedSystem("policy", PolicySystem(agent, cfg.scene.object.cloud_points))
+        policy = builder.AddNamedSystem("policy", PolicySystem(
+            agent, cfg.scene.object.cloud_points, stochastic=stochastic_policy))
         builder.Connect(handles.observations.GetOutputPort("observation"),
                         policy.GetInputPort("observation"))
         builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
+        if stochastic_policy:
+            noise = builder.AddNamedSystem("policy_noise", RandomSource(
+                RandomDistribution.kGaussian, ACTION_DIM, clock_of(cfg.scene.physics).period))
+            builder.Connect(noise.get_output_port(), policy.GetInputPort("unit_noise"))
         handles.policy = policy
     if meshcat is not None:
         from corn_drake.viz.meshcat import add_meshcat_visualizer

@@ -139,9 +139,9 @@ def run(args) -> int:
         train_cfg, agent = load_run(args.run)
         policy = train_cfg.policy
         if args.stochastic:
-            import torch
+            from corn_drake.systems.policy import SampledActions
 
-            agent.action_noise = torch.Generator().manual_seed(args.seed)
+            agent = SampledActions(agent)  # the diagram samples: RandomSource seeded per episode
         cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
