@@ -9,6 +9,7 @@ yaml_load_typed needs real types on the fields.
 import dataclasses as dc
 
 from corn_drake.config import TeacherDiagramConfig
+from corn_drake.contract import ENCODER_INPUT_SCALE
 
 # The authors' three eyes (official code), in the table frame = our world frame.
 DEFAULT_EYES = [[0.458, -0.40, 0.740], [-0.238, 0.388, 0.694], [-0.408, -0.328, 0.706]]
@@ -96,9 +97,9 @@ class TrackerConfig:
     min_points: int = 20
 
 
-# The policy's cloud normalisation (x - (0, 0, 0.55)) / 0.4 (rl/agent.py CLOUD_SCALE): the
-# paper's observation noises are stated in those units.
-NORMALISED_UNIT_M = 0.4
+# The encoders' input normalisation divides positions by this (contract.ENCODER_INPUT_SCALE):
+# the paper's observation noises are stated in those units.
+NORMALISED_UNIT_M = ENCODER_INPUT_SCALE
 
 
 @dc.dataclass
