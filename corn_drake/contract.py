@@ -113,6 +113,15 @@ def free_body_pose(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x[FREE_BODY_POSITION], quat_wxyz_to_matrix(x[FREE_BODY_QUATERNION])
 
 
+def free_body_pose7_selector() -> np.ndarray:
+    """(POSE7_DIM, FREE_BODY_STATE_DIM) matrix S with S @ state = pose7 [p, q_wxyz] (e.g. the
+    gain of a MatrixGain turning a plant's free-body state output into a pose7 signal)."""
+    S = np.zeros((POSE7_DIM, FREE_BODY_STATE_DIM))
+    S[:POSITION_DIM, FREE_BODY_POSITION] = np.eye(POSITION_DIM)
+    S[POSITION_DIM:, FREE_BODY_QUATERNION] = np.eye(slice_size(FREE_BODY_QUATERNION))
+    return S
+
+
 def check_action(action) -> np.ndarray:
     """A normalised action as a flat float array; a wrong size or a non-finite entry raises
     ValueError naming it (before anything reaches the simulator)."""

@@ -21,7 +21,7 @@ from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroO
 
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
-from corn_drake.contract import ACTION_DIM
+from corn_drake.contract import ACTION_DIM, NUM_JOINTS
 from corn_drake.errors import InputError
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
@@ -124,7 +124,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     builder.Connect(ctrl.GetOutputPort("actuation"), plant.get_actuation_input_port(scene.panda))
     if with_noise:
         noise = builder.AddNamedSystem("torque_noise", RandomSource(
-            RandomDistribution.kGaussian, 7, physics.time_step))
+            RandomDistribution.kGaussian, NUM_JOINTS, physics.time_step))
         builder.Connect(noise.get_output_port(), ctrl.GetInputPort("unit_noise"))
 
     obs = builder.AddNamedSystem("observations", TeacherObservations(n_pts, cfg.scene.robot_base))

@@ -12,6 +12,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.contract import ACTION_DIM
 from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, load_student_config
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.systems.pose_tracker import TrackerState, pose_error
@@ -30,7 +31,7 @@ class PerceptionHarness:
         self.scene = self.student.scene
         self.per = self.student.perception
         self.context = self.diagram.CreateDefaultContext()
-        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(20))
+        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(ACTION_DIM))
         self.plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
         self.tracker_context = self.per.tracker.GetMyMutableContextFromRoot(self.context)
         self.seg_context = self.per.segmentation.GetMyContextFromRoot(self.context)
