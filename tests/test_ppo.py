@@ -1,8 +1,10 @@
 """PPO on hand-made batches: GAE with time-outs, loss decreases, KL early stop, bound loss."""
 
+import pytest
 import torch
 from torch import nn
 
+from corn_drake.errors import InputError
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RewardScaler, RunningMeanStd
 from corn_drake.config import PPOConfig
@@ -138,6 +140,11 @@ def test_the_agent_normalises_its_context_with_the_one_running_mean_std():
     torch.testing.assert_close(loaded.normalized_context(probe), agent.normalized_context(probe))
     assert not torch.allclose(TeacherAgent("state").normalized_context(probe),
                               agent.normalized_context(probe))
+    # A checkpoint from before the normaliser was a module is refused, naming the file.
+    old = {k: v for k, v in state.items() if not k.startswith("context_normalizer.")}
+    old.update(ctx_mean=torch.zeros(CONTEXT_DIM), ctx_var=torch.ones(CONTEXT_DIM))
+    with pytest.raises(InputError, match="old_run/last.pt.*train the run again"):
+        loaded.load_saved_state(old, "old_run/last.pt")
 
 
 def test_reward_scaler_state_round_trips():

@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
+from corn_drake.errors import InputError
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RunningMeanStd
@@ -65,6 +66,18 @@ class TeacherAgent(nn.Module):
     def frozen_encoder(self) -> bool:
         """True for corn / pn: PPO never trains the encoder, so its features can be cached."""
         return self.kind in ("corn", "pn")
+
+    def load_saved_state(self, state: dict, source) -> None:
+        """Loads a state_dict saved from an agent of this kind; one that does not fit (another
+        policy, or a checkpoint written before the context normaliser and the encoder's input
+        normalisation became part of the agent) is an InputError naming `source`."""
+        try:
+            self.load_state_dict(state)
+        except RuntimeError as e:
+            detail = str(e).strip().splitlines()[-1].strip() if str(e).strip() else type(e).__name__
+            raise InputError(f"{source}: the saved {self.kind!r} agent does not fit this version "
+                             f"({detail}); checkpoints written before the agent carried its "
+                             "normalisers cannot be loaded: train the run again") from None
 
     def update_normalizer(self, context: torch.Tensor) -> None:
         self.context_normalizer.update(context)
