@@ -80,6 +80,7 @@ def load_student_config(path: str | Path | None = None,
     if not path.is_file():
         raise MissingInputError(f"config file not found: {path}")
     defaults = copy.deepcopy(base) if base is not None else StudentDiagramConfig()
+    # load_config's own loader and error reporting, with yaml_load_typed's defaults= layering.
     cfg = _load_typed(StudentDiagramConfig, str(path), filename=str(path), defaults=defaults)
     cfg.check()
     return cfg
