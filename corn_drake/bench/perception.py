@@ -21,7 +21,8 @@ HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stag
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", default=None, help="student diagram YAML")
+    parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
+                        "the defaults like diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--frames", type=positive_int, default=100)
     parser.add_argument("--width", type=positive_int, default=None, help="override camera width")
     parser.add_argument("--height", type=positive_int, default=None, help="override camera height")
