@@ -28,7 +28,6 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import EventStatus, LeafSystem
 
-from corn_drake.contract import GOAL_DIM, POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix, rotation_angle
 
 STATUS_FIELDS = ("ok", "fitness", "inlier_rmse", "num_points", "reregistered")
@@ -160,15 +159,14 @@ class PoseTracker(LeafSystem):
         self._point_to_plane = not thin
         self._state_index = self.DeclareAbstractState(AbstractValue.Make(TrackerState()))
         self.DeclareAbstractInputPort("object_cloud", AbstractValue.Make(PointCloud()))
-        self.DeclareVectorInputPort("initial_pose", POSE7_DIM)
-        self.DeclareVectorInputPort("goal_pose", POSE7_DIM)
+        self.DeclareVectorInputPort("initial_pose", 7)
+        self.DeclareVectorInputPort("goal_pose", 7)
         state_only = {self.abstract_state_ticket(self._state_index)}
-        self.DeclareVectorOutputPort("pose", POSE7_DIM, self._calc_pose,
-                                     prerequisites_of_calc=state_only)
+        self.DeclareVectorOutputPort("pose", 7, self._calc_pose, prerequisites_of_calc=state_only)
         self.DeclareVectorOutputPort("status", len(STATUS_FIELDS), self._calc_status,
                                      prerequisites_of_calc=state_only)
         self.DeclareVectorOutputPort(
-            "goal", GOAL_DIM, self._calc_goal,
+            "goal", 9, self._calc_goal,
             prerequisites_of_calc={self.abstract_state_ticket(self._state_index),
                                    self.input_port_ticket(self.GetInputPort("goal_pose").get_index())})
         self.DeclareInitializationUnrestrictedUpdateEvent(self._on_update)
@@ -211,8 +209,7 @@ class PoseTracker(LeafSystem):
     def _calc_goal(self, context, output):
         X = self.tracker_state(context).X
         g = self.GetInputPort("goal_pose").Eval(context)
-        output.SetFromVector(pose9(g[POSE7_POSITION] - X[:3, 3],
-                                   quat_wxyz_to_matrix(g[POSE7_QUATERNION]) @ X[:3, :3].T))
+        output.SetFromVector(pose9(g[:3] - X[:3, 3], quat_wxyz_to_matrix(g[3:]) @ X[:3, :3].T))
 
 
 def pose_error(X_est: np.ndarray, X_true: np.ndarray) -> tuple[float, float]:
