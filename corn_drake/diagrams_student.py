@@ -20,6 +20,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import yaml
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, RandomSource
@@ -30,7 +31,7 @@ from corn_drake.config_student import StudentDiagramConfig
 from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
                                  POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
 from corn_drake.diagrams import TeacherDiagram, add_teacher_systems
-from corn_drake.errors import MissingInputError
+from corn_drake.errors import InputError, MissingInputError
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
@@ -80,8 +81,14 @@ def load_student_config(path: str | Path | None = None,
     if not path.is_file():
         raise MissingInputError(f"config file not found: {path}")
     defaults = copy.deepcopy(base) if base is not None else StudentDiagramConfig()
-    # load_config's own loader and error reporting, with yaml_load_typed's defaults= layering.
-    cfg = _load_typed(StudentDiagramConfig, str(path), filename=str(path), defaults=defaults)
+    try:
+        # load_config's own loader and error reporting, with yaml_load_typed's defaults= layering.
+        cfg = _load_typed(StudentDiagramConfig, str(path), filename=str(path), defaults=defaults)
+    except yaml.YAMLError as e:
+        # A value Drake could not convert, in a file with Drake's tags (focal: !FovDegrees ...):
+        # the field finder's plain YAML reader cannot read those tags; report Drake's error.
+        cause = e.__context__ or e
+        raise InputError(f"invalid config {path}: {' '.join(str(cause).split())}") from cause
     cfg.check()
     return cfg
 

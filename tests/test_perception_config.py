@@ -79,6 +79,10 @@ def test_loader_names_the_file_and_the_field(tmp_path):
         load_student_config(bad)
     with pytest.raises(InputError, match="not found"):
         load_student_config(tmp_path / "missing.yaml")
+    # A bad value in a file holding one of Drake's variant tags is still an InputError.
+    bad.write_text("cameras:\n  camera:\n    focal: !FovDegrees {y: 30}\n    width: wide\n")
+    with pytest.raises(InputError, match="bad.yaml.*wide"):
+        load_student_config(bad)
 
 
 def test_resolved_config_round_trips_through_yaml_and_pickle():
