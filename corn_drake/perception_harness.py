@@ -12,10 +12,12 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.contract import ACTION_DIM
 from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, load_student_config
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.systems.pose_tracker import TrackerState, pose_error
 from corn_drake.systems.segmentation import SegmentationStats
+from corn_drake.timing import clock_of
 
 # An arm pose with the hand above the table's near half: in view of all three cameras.
 ARM_IN_VIEW = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.4, 0.8])
@@ -30,12 +32,17 @@ class PerceptionHarness:
         self.scene = self.student.scene
         self.per = self.student.perception
         self.context = self.diagram.CreateDefaultContext()
-        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(20))
+        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(ACTION_DIM))
         self.plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
         self.tracker_context = self.per.tracker.GetMyMutableContextFromRoot(self.context)
         self.seg_context = self.per.segmentation.GetMyContextFromRoot(self.context)
         self.object_label = int(self.scene.object_body.index())
         self.set_robot(ARM_IN_VIEW)
+
+    @property
+    def frame_period(self) -> float:
+        """Seconds between two tracker updates: one policy step."""
+        return clock_of(self.cfg.teacher.scene.physics).period
 
     # --- posing ------------------------------------------------------------------------------
     def set_robot(self, q) -> None:
@@ -93,7 +100,7 @@ class PerceptionHarness:
             p.Eval(s.GetMyContextFromRoot(ctx))
         t1 = time.perf_counter()
         for c in per.rig.to_cloud:
-            c.get_output_port().Eval(c.GetMyContextFromRoot(ctx))
+            c.point_cloud_output_port().Eval(c.GetMyContextFromRoot(ctx))
         t2 = time.perf_counter()
         per.segmentation.GetOutputPort("object_cloud").Eval(self.seg_context)
         t3 = time.perf_counter()
