@@ -324,7 +324,6 @@ def config_fields(cfg) -> dict[str, Any]:
     config.yaml is written with (so Drake's config structs flatten too, and floats compare as
     the file holds them)."""
     from pydrake.common.yaml import yaml_dump_typed
-    import yaml
 
     def flat(value, prefix):
         if not isinstance(value, dict):
@@ -334,7 +333,60 @@ def config_fields(cfg) -> dict[str, Any]:
             out.update(flat(item, f"{prefix}.{key}" if prefix else str(key)))
         return out
 
-    return flat(yaml.safe_load(yaml_dump_typed(cfg)), "")
+    return flat(read_tagged_yaml(yaml_dump_typed(cfg)), "")
+
+
+class TaggedMapping(dict):
+    """A YAML mapping that carried a type tag (Drake's variants: `focal: !FovDegrees {y: 50}`,
+    `goal: !PlanarGoal {...}`); flattened by config_fields as a `!` entry beside the fields."""
+
+    def __init__(self, tag: str, items):
+        super().__init__(items)
+        self["!"] = tag
+
+
+def _tagged_loader():
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    def construct(loader, tag, node):
+        if isinstance(node, yaml.MappingNode):
+            return TaggedMapping(tag, loader.construct_mapping(node, deep=True))
+        return TaggedMapping(tag, {})  # `!Tag` alone, or `!Tag ''`: a variant with defaults
+
+    Loader.add_multi_constructor("!", construct)
+    return Loader
+
+
+def _tagged_dumper():
+    import yaml
+
+    class Dumper(yaml.SafeDumper):
+        pass
+
+    def represent(dumper, data):
+        fields = {k: v for k, v in data.items() if k != "!"}
+        return dumper.represent_mapping("!" + data["!"], fields)
+
+    Dumper.add_representer(TaggedMapping, represent)
+    return Dumper
+
+
+def read_tagged_yaml(text: str):
+    """YAML text as plain data, keeping Drake's variant tags (TaggedMapping) where yaml.safe_load
+    would refuse them."""
+    import yaml
+
+    return yaml.load(text, Loader=_tagged_loader())  # noqa: S506 (a SafeLoader subclass)
+
+
+def dump_tagged_yaml(data) -> str:
+    """The inverse of read_tagged_yaml: tags written back in front of their mappings."""
+    import yaml
+
+    return yaml.dump(data, Dumper=_tagged_dumper(), sort_keys=False)
 
 
 def field_types(schema) -> dict[str, Any] | None:
@@ -370,7 +422,7 @@ def _load_typed(schema: type[T], name: str, defaults: T | None = None, **source)
         raise InputError(f"invalid config {name}: {_one_line(e)}") from e
     except _LOAD_ERRORS as e:
         text = source["data"] if "data" in source else Path(source["filename"]).read_text()
-        found = _failing_field(schema, yaml.safe_load(text))
+        found = _failing_field(schema, read_tagged_yaml(text))
         # drake's asserts carry only the offending value as their message.
         detail = "wrong type" if isinstance(e, AssertionError) else _one_line(e)
         if found is None:
@@ -392,7 +444,7 @@ def _failing_field(schema: type, data, path: str = "") -> tuple[str, object] | N
         if key not in types:
             continue  # an unknown key fails with drake's own RuntimeError naming it
         try:
-            yaml_load_typed(schema=schema, data=yaml.safe_dump({key: value}))
+            yaml_load_typed(schema=schema, data=dump_tagged_yaml({key: value}))
         except _LOAD_ERRORS:
             name = f"{path}.{key}" if path else str(key)
             if field_types(types[key]) is not None:

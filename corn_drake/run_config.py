@@ -85,9 +85,9 @@ def load_env_config(task: str | Path | None = None) -> TeacherDiagramConfig:
 
 
 def _sets_task_name(path: Path) -> bool:
-    import yaml
+    from corn_drake.config import read_tagged_yaml
 
-    data = yaml.safe_load(path.read_text())  # loaded (and checked) by load_config already
+    data = read_tagged_yaml(path.read_text())  # loaded (and checked) by load_config already
     return isinstance(data, dict) and isinstance(data.get("task"), dict) and "name" in data["task"]
 
 
