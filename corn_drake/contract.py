@@ -61,6 +61,9 @@ FREE_BODY_QUATERNION = slice(0, 4)
 FREE_BODY_POSITION = slice(4, 7)
 FREE_BODY_ANGULAR_VELOCITY = slice(7, 10)
 FREE_BODY_LINEAR_VELOCITY = slice(10, 13)
+# A pose7 (POSE7_DIM: our pose sources, the tracker's estimate): position, then quaternion wxyz.
+POSE7_POSITION = slice(0, 3)
+POSE7_QUATERNION = slice(3, 7)
 
 # --- observation ----------------------------------------------------------------------------
 OBS_KEYS = ("cloud", "hand_state", "robot_state", "previous_action", "goal", "physics",
@@ -111,15 +114,6 @@ def free_body_pose(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     x = np.asarray(x)
     return x[FREE_BODY_POSITION], quat_wxyz_to_matrix(x[FREE_BODY_QUATERNION])
-
-
-def free_body_pose7_selector() -> np.ndarray:
-    """(POSE7_DIM, FREE_BODY_STATE_DIM) matrix S with S @ state = pose7 [p, q_wxyz] (e.g. the
-    gain of a MatrixGain turning a plant's free-body state output into a pose7 signal)."""
-    S = np.zeros((POSE7_DIM, FREE_BODY_STATE_DIM))
-    S[:POSITION_DIM, FREE_BODY_POSITION] = np.eye(POSITION_DIM)
-    S[POSITION_DIM:, FREE_BODY_QUATERNION] = np.eye(slice_size(FREE_BODY_QUATERNION))
-    return S
 
 
 def check_action(action) -> np.ndarray:

@@ -19,10 +19,10 @@ from pydrake.common import RandomDistribution, RandomGenerator
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
-from corn_drake import DIAGRAMS_DIR
-from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
+from corn_drake.config import ObjectConfig, TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, NUM_JOINTS
 from corn_drake.errors import InputError
+from corn_drake.run_config import load_env_config
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
 from corn_drake.systems.energy_meter import add_energy_meter
@@ -51,15 +51,19 @@ class TeacherDiagram:
 
 
 def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
+    """The one object `cfg` names (a diagram holds one object; EnvFactory picks one per episode
+    from a config naming all train objects of a library)."""
+    if cfg.cycles_library:
+        raise InputError(f"scene.object names every train object of library {cfg.library} "
+                         "(library_objects: train): a diagram holds one; set library_objects: "
+                         "one and an object_id")
     if cfg.kind == "box":
         return box_spec(cfg.size, cfg.mass, seed=seed)
     if cfg.kind == "cylinder":
         return cylinder_spec(cfg.radius, cfg.length, cfg.mass, seed=seed)
-    if cfg.kind == "library":
-        from corn_drake.assets.library import load_object_spec
+    from corn_drake.assets.library import load_object_spec
 
-        return load_object_spec(cfg.library, cfg.object_id)
-    raise InputError(f"scene.object.kind must be box, cylinder or library, got {cfg.kind!r}")
+    return load_object_spec(cfg.library, cfg.object_id)
 
 
 def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -> int:
@@ -79,7 +83,9 @@ def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -
 
 
 def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:
-    return load_config(path or DIAGRAMS_DIR / "teacher_rollout.yaml", TeacherDiagramConfig)
+    """The teacher diagram's config: the base diagram (diagrams/teacher_rollout.yaml), with the
+    task overlay `path` (a YAML file or a task name, as `--task`) on top."""
+    return load_env_config(path)
 
 
 def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
@@ -160,7 +166,7 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
     """The teacher rollout diagram; the action is the exported input `controller.action`.
 
     With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
-    (the evaluation diagram, diagrams/evaluation.yaml) and there is no action input. With
+    (the evaluation diagram, `corn-drake evaluate`) and there is no action input. With
     `stochastic_policy`, it samples its actions: a RandomSource named "policy_noise" feeds it
     N(0, 1) draws, a fresh one every policy period (reseed_random_sources seeds it per episode).
     """

@@ -17,6 +17,7 @@ from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, l
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.systems.pose_tracker import TrackerState, pose_error
 from corn_drake.systems.segmentation import SegmentationStats
+from corn_drake.timing import clock_of
 
 # An arm pose with the hand above the table's near half: in view of all three cameras.
 ARM_IN_VIEW = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.4, 0.8])
@@ -37,6 +38,11 @@ class PerceptionHarness:
         self.seg_context = self.per.segmentation.GetMyContextFromRoot(self.context)
         self.object_label = int(self.scene.object_body.index())
         self.set_robot(ARM_IN_VIEW)
+
+    @property
+    def frame_period(self) -> float:
+        """Seconds between two tracker updates: one policy step."""
+        return clock_of(self.cfg.teacher.scene.physics).period
 
     # --- posing ------------------------------------------------------------------------------
     def set_robot(self, q) -> None:
@@ -94,7 +100,7 @@ class PerceptionHarness:
             p.Eval(s.GetMyContextFromRoot(ctx))
         t1 = time.perf_counter()
         for c in per.rig.to_cloud:
-            c.get_output_port().Eval(c.GetMyContextFromRoot(ctx))
+            c.point_cloud_output_port().Eval(c.GetMyContextFromRoot(ctx))
         t2 = time.perf_counter()
         per.segmentation.GetOutputPort("object_cloud").Eval(self.seg_context)
         t3 = time.perf_counter()

@@ -53,7 +53,7 @@ def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
     build_procedural(lib, 3, seed=0, cfg=cfg, progress=False)  # block, book, bottle (unseen)
     report = tmp_path / "eval.json"
     assert main(["evaluate", "--run", "still", "--objects", str(lib), "--split", "all",
-                 "--config", str(DIAGRAMS_DIR / "reduced_benchmark_push.yaml"),
+                 "--task", str(DIAGRAMS_DIR / "reduced_benchmark_push.yaml"),
                  "--episodes", "3", "--record", "0", "--report", str(report)]) == 0
     data = json.loads(report.read_text())
     assert data["success_by_group"] == {

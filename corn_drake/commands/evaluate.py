@@ -1,6 +1,9 @@
 """`corn-drake evaluate`: success of a trained teacher in the evaluation diagram.
 
-The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
+A run is evaluated on exactly the env it was trained on: its config.yaml (task, controller
+action step, episode length, object or library). `--task` and `--set` override it; what they
+change is printed and recorded in the report (`overrides`), with the task's name and the action
+step. The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
 (the run's object, or the --split objects of a library: --objects, else the one the run was
 trained on with `train --objects`); K of them are recorded to Meshcat HTML next to the report.
 The report's folder (and the recordings') are checked writable before the first episode.
@@ -32,8 +35,14 @@ def add_arguments(parser):
     parser.add_argument("--episodes", type=positive_int, default=10)
     parser.add_argument("--record", type=nonnegative_int, default=1,
                         help="episodes saved as Meshcat HTML")
-    parser.add_argument("--config", default=None,
-                        help="evaluation diagram YAML (default: diagrams/evaluation.yaml)")
+    parser.add_argument("--task", default=None,
+                        help="task overlay (a name in diagrams/tasks/ or a YAML file) instead of "
+                             "the run's task; for --run scripted/still, the task to run "
+                             "(default: the paper's 6D task)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                        help="override an env setting of the run's config, e.g. --set "
+                             "task.episode_steps=50 (repeatable; printed and recorded in the "
+                             "report)")
     parser.add_argument("--seed", type=nonnegative_int, default=1000)
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
@@ -41,9 +50,9 @@ def add_arguments(parser):
 
 
 def _whole_library(obj) -> str:
-    """The library of an object config that names a whole library (object_id ""), as
-    `train --objects` records it; "" for a single object."""
-    return obj.library if obj.kind == "library" and not obj.object_id else ""
+    """The library of an object config that names all its train objects (library_objects:
+    train), as `train --objects` records it; "" for a single object."""
+    return obj.library if obj.cycles_library else ""
 
 
 def _object_specs(args, cfg):
@@ -112,11 +121,12 @@ def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
 
 
 def run(args) -> int:
-    from corn_drake.config import TeacherDiagramConfig, load_config
-    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.config import TrainConfig
     from corn_drake.errors import InputError
     from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
+    from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
+                                       replace_task)
 
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
@@ -126,27 +136,38 @@ def run(args) -> int:
     ensure_writable(report_path.parent, "--report")
     if args.record > 0:
         ensure_writable(out_dir, "--record")
-    cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
     if args.run in REFERENCES:
         if args.stochastic:
             raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                              "deterministic reference controller")
         from corn_drake.rl import scripted
 
-        agent = getattr(scripted, REFERENCES[args.run])(cfg.controller)
+        # A reference has no run: --task chooses its task, --set changes that task.
+        base = TrainConfig(env=load_env_config(args.task))
+        run_cfg = apply_sets(base, args.set, only="env")
+        agent = getattr(scripted, REFERENCES[args.run])(run_cfg.env.controller)
         policy = args.run
     else:
-        train_cfg, agent = load_run(args.run)
-        policy = train_cfg.policy
+        # The run's own config: the task, controller and object(s) it was trained on;
+        # --task and --set are overrides of it.
+        base, agent = load_run(args.run)
+        run_cfg = replace_task(base, args.task) if args.task is not None else base
+        run_cfg = apply_sets(run_cfg, args.set, only="env")
+        policy = base.policy
         if args.stochastic:
             from corn_drake.systems.policy import SampledActions
 
             agent = SampledActions(agent)  # the diagram samples: RandomSource seeded per episode
-        cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
+    overrides = config_changes(base, run_cfg)
+    cfg = run_cfg.env
+    print(f"evaluate {args.run} on task {cfg.task.name}"
+          + "".join(f"; {change}" for change in overrides))
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
-    report.update({"run": str(args.run), "policy": policy, "split": args.split,
-                   "actions": "sampled" if args.stochastic else "mean"})
+    report.update({"run": str(args.run), "policy": policy, "task": cfg.task.name,
+                   "action_step": cfg.controller.max_position_delta,
+                   "overrides": [dataclasses.asdict(change) for change in overrides],
+                   "split": args.split, "actions": "sampled" if args.stochastic else "mean"})
     if args.objects:
         from corn_drake.assets.library import object_groups
 

@@ -24,7 +24,7 @@ from corn_drake.contact.shards import load_split
 from corn_drake.errors import InputError
 from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.encoder import CORNContactModel
-from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_DIM, POSITION_DIM
+from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.nn.encoder_io import NormalizedEncoder, save_encoder
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
 from corn_drake.nn.input_normalization import InputNormalization
@@ -53,7 +53,7 @@ def _set_global_rng_state(state: dict) -> None:
 
 def hand9(hand_pose: torch.Tensor, normalization: InputNormalization) -> torch.Tensor:
     """Tool pose (B, 7: xyz + wxyz) -> normalised position + 6D rotation (B, 9)."""
-    p, q = hand_pose[:, :POSITION_DIM], hand_pose[:, POSITION_DIM:POSE7_DIM]
+    p, q = hand_pose[:, POSE7_POSITION], hand_pose[:, POSE7_QUATERNION]
     return normalization.hand(torch.cat([p, rot6d(quat_wxyz_to_matrix(q))], -1))
 
 
@@ -66,8 +66,8 @@ def augment(points, hand_pose, cfg: PretrainConfig, g: torch.Generator,
     R = yaw_matrix(torch.rand(B, generator=g) * 2 * math.pi)
     shift = torch.randn(B, 1, 3, generator=g) * cfg.translate_std
     points = (points - center) @ R.transpose(1, 2) + center + shift
-    hand_R = R @ quat_wxyz_to_matrix(hand_pose[:, 3:])
-    hand_p = ((hand_pose[:, None, :3] - center) @ R.transpose(1, 2) + center + shift)[:, 0]
+    hand_R = R @ quat_wxyz_to_matrix(hand_pose[:, POSE7_QUATERNION])
+    hand_p = ((hand_pose[:, None, POSE7_POSITION] - center) @ R.transpose(1, 2) + center + shift)[:, 0]
     points = points + torch.randn(points.shape, generator=g) * cfg.point_noise_std
     return normalization.points(points), normalization.hand(torch.cat([hand_p, rot6d(hand_R)], -1))
 

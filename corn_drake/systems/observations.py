@@ -19,7 +19,8 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from corn_drake.contract import (ACTION_DIM, FREE_BODY_STATE_DIM, KEYPOINTS_DIM, OBS_KEYS,
-                                 PHYSICS_DIM, POSE7_DIM, POSITION_DIM, ROBOT_STATE_DIM,
+                                 PHYSICS_DIM, POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION,
+                                 POSITION_DIM, ROBOT_STATE_DIM,
                                  free_body_pose, observation_shapes, slice_size)
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix
@@ -74,7 +75,7 @@ class TeacherObservations(LeafSystem):
             "hand_state": pose9(X_tool.translation(), X_tool.rotation().matrix()),
             "robot_state": x,
             "previous_action": get("previous_action"),
-            "goal": pose9(g[:POSITION_DIM] - p, quat_wxyz_to_matrix(g[POSITION_DIM:]) @ R.T),
+            "goal": pose9(g[POSE7_POSITION] - p, quat_wxyz_to_matrix(g[POSE7_QUATERNION]) @ R.T),
             "physics": get("physics_params"),
             "object_keypoints": get("object_corners").reshape(-1, POSITION_DIM) @ R.T + p,
         }

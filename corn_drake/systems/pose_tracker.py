@@ -28,7 +28,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import EventStatus, LeafSystem
 
-from corn_drake.contract import GOAL_DIM, POSE7_DIM, POSITION_DIM
+from corn_drake.contract import GOAL_DIM, POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix, rotation_angle
 
 STATUS_FIELDS = ("ok", "fitness", "inlier_rmse", "num_points", "reregistered")
@@ -48,8 +48,8 @@ class TrackerState:
 def pose7_to_matrix(p7) -> np.ndarray:
     p7 = np.asarray(p7, float)
     X = np.eye(4)
-    X[:3, :3] = quat_wxyz_to_matrix(p7[POSITION_DIM:POSE7_DIM])
-    X[:3, 3] = p7[:POSITION_DIM]
+    X[:3, :3] = quat_wxyz_to_matrix(p7[POSE7_QUATERNION])
+    X[:3, 3] = p7[POSE7_POSITION]
     return X
 
 
@@ -210,8 +210,8 @@ class PoseTracker(LeafSystem):
     def _calc_goal(self, context, output):
         X = self.tracker_state(context).X
         g = self._goal_pose.Eval(context)
-        output.SetFromVector(pose9(g[:POSITION_DIM] - X[:3, 3],
-                                   quat_wxyz_to_matrix(g[POSITION_DIM:]) @ X[:3, :3].T))
+        output.SetFromVector(pose9(g[POSE7_POSITION] - X[:3, 3],
+                                   quat_wxyz_to_matrix(g[POSE7_QUATERNION]) @ X[:3, :3].T))
 
 
 def pose_error(X_est: np.ndarray, X_true: np.ndarray) -> tuple[float, float]:

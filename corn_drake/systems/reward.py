@@ -20,7 +20,8 @@ from pydrake.systems.primitives import Multiplexer, ZeroOrderHold
 
 from corn_drake.config import TaskConfig
 from corn_drake.contract import (FREE_BODY_STATE_DIM, HAND_STATE_DIM, KEYPOINTS_DIM, POSE7_DIM,
-                                 POSE9_POSITION, POSITION_DIM, free_body_pose)
+                                 POSE7_POSITION, POSE7_QUATERNION, POSE9_POSITION, POSITION_DIM,
+                                 free_body_pose)
 from corn_drake.timing import PolicyClock
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
@@ -67,7 +68,7 @@ class TaskReward(LeafSystem):
 
     def _goal(self, context):
         g = self._goal_pose.Eval(context)
-        return g[:POSITION_DIM], quat_wxyz_to_matrix(g[POSITION_DIM:])
+        return g[POSE7_POSITION], quat_wxyz_to_matrix(g[POSE7_QUATERNION])
 
     def potentials(self, context, object_state, tool_position) -> tuple[float, float]:
         cfg = self._cfg
