@@ -51,17 +51,17 @@ class TeacherDiagram:
     config: TeacherDiagramConfig
     cloud_indices: np.ndarray  # which rows of the object's cloud the observation uses
     policy: object = None  # the PolicySystem of an evaluation diagram
-    # (root diagram, its default context): what write_episode restores before each episode.
+    # (diagram, its default context): what write_episode restores before each episode.
     _default: tuple = dataclasses.field(default=(None, None), repr=False)
 
-    def write_episode(self, context, episode: Episode, rng: np.random.Generator,
-                      root: Diagram | None = None) -> None:
-        """Writes `episode` into `context`, the root context of `root` (default: this diagram;
-        the student diagram passes its own): the default context at the policy clock's first
-        boundary, the sampled physics, robot joints and object pose, the per-episode sources,
-        fresh seeds for every RandomSource from `rng`, the IK latch holding the start joints and
-        the reward's previous-step hold at the start state. Call Simulator.Initialize() after."""
-        root = root or self.diagram
+    def write_episode(self, context, episode: Episode, rng: np.random.Generator) -> None:
+        """Writes `episode` into `context`, the root context of `self.diagram` (the teacher
+        diagram, or the student diagram built around these systems): the default context at the
+        policy clock's first boundary, the sampled physics, robot joints and object pose, the
+        per-episode sources, fresh seeds for every RandomSource from `rng`, the IK latch holding
+        the start joints and the reward's previous-step hold at the start state. Call
+        Simulator.Initialize() after."""
+        root = self.diagram
         if self._default[0] is not root:
             self._default = (root, root.CreateDefaultContext())
         scene, spec, phys = self.scene, self.scene.object_spec, episode.physics
