@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import TeacherDiagramConfig, load_config, load_config_string
 from corn_drake.errors import InputError
 from corn_drake.rl.env import TeacherEnv
@@ -16,8 +15,10 @@ EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
 
 
 def _task(name: str) -> TeacherDiagramConfig:
-    """A task overlay of diagrams/tasks/ loaded on its own (its missing keys take the defaults)."""
-    return load_config(DIAGRAMS_DIR / "tasks" / f"{name}.yaml", TeacherDiagramConfig)
+    """The base diagram with the task overlay diagrams/tasks/NAME.yaml on top."""
+    from corn_drake.run_config import load_env_config
+
+    return load_env_config(name)
 
 
 @pytest.fixture(scope="module")

@@ -2,8 +2,6 @@
 that cannot be met raise naming the task and the ranges, and the overlays in diagrams/tasks/
 load with their tags and restate no default."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 import yaml
@@ -11,6 +9,7 @@ import yaml
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config import TaskConfig, TeacherDiagramConfig, load_config, load_config_string
 from corn_drake.errors import InputError
+from corn_drake.run_config import apply_sets, available_tasks, config_changes, load_env_config
 from corn_drake.scene.objects import box_spec
 from corn_drake.tasks.sampling import TABLE_MARGIN, sample_object_and_goal, sample_robot_joints
 from corn_drake.tasks.specs import Full6dGoal, PlanarGoal, PushFromHandGoal
@@ -190,8 +189,8 @@ def _restated_defaults(overlay, default, path=""):
 @pytest.mark.parametrize("name", ["full6d", "planar", "planar_near", "push"])
 def test_task_overlays_name_their_task_and_only_what_differs(name):
     path = DIAGRAMS_DIR / "tasks" / f"{name}.yaml"
-    cfg = load_config(path, TeacherDiagramConfig)
-    assert cfg.task.name == name
+    cfg = load_config(path, TeacherDiagramConfig)  # on its own: the missing keys are defaults
+    assert cfg.task.name == name and load_env_config(name).task.name == name
     overlay = yaml.load(path.read_text(), Loader=_TagLoader)
     restated = [k for k in _restated_defaults(overlay, TeacherDiagramConfig()) if k != "task.name"
                 or name != "full6d"]
@@ -199,11 +198,10 @@ def test_task_overlays_name_their_task_and_only_what_differs(name):
 
 
 def test_task_overlays_choose_their_goal_variant():
-    goals = {n: type(load_config(DIAGRAMS_DIR / "tasks" / f"{n}.yaml", TeacherDiagramConfig)
-                     .task.goal) for n in ("full6d", "planar", "planar_near", "push")}
+    goals = {n: type(load_env_config(n).task.goal) for n in available_tasks()}
     assert goals == {"full6d": Full6dGoal, "planar": PlanarGoal, "planar_near": PlanarGoal,
                      "push": PushFromHandGoal}
-    push = load_config(DIAGRAMS_DIR / "tasks" / "push.yaml", TeacherDiagramConfig)
+    push = load_env_config("push")
     assert not push.task.check_orientation and push.controller.max_position_delta == 0.03
     # Every overlay is listed in the folder's README.
     readme = (DIAGRAMS_DIR / "tasks" / "README.md").read_text()
@@ -214,10 +212,12 @@ def test_task_overlays_choose_their_goal_variant():
 def test_a_tagged_config_round_trips_through_yaml_dump():
     from pydrake.common.yaml import yaml_dump_typed
 
-    cfg = load_config(DIAGRAMS_DIR / "tasks" / "push.yaml", TeacherDiagramConfig)
+    from corn_drake.config import config_fields
+
+    cfg = load_env_config("push")
     again = load_config_string(yaml_dump_typed(cfg), TeacherDiagramConfig)
-    assert dataclasses.asdict(again) == dataclasses.asdict(cfg)
-    assert type(again.task.goal) is PushFromHandGoal
+    assert config_fields(again) == config_fields(cfg)
+    assert again.task.goal == cfg.task.goal and type(again.task.goal) is PushFromHandGoal
 
 
 def test_a_bad_value_inside_a_tagged_goal_is_named():
@@ -226,3 +226,17 @@ def test_a_bad_value_inside_a_tagged_goal_is_named():
     with pytest.raises(InputError, match=r"task\.goal\.heading_spread = 'wide'"):
         load_config_string("task:\n  goal: !PushFromHandGoal {heading_spread: wide}\n",
                            TeacherDiagramConfig)
+
+
+def test_set_changes_a_field_of_the_task_goal_variant_or_the_variant():
+    from corn_drake.config import TrainConfig
+
+    push = TrainConfig(env=load_env_config("push"))
+    wider = apply_sets(push, ["task.goal.distance=[0.05, 0.1]"])
+    assert wider.env.task.goal == PushFromHandGoal(distance=[0.05, 0.1])  # still the push goal
+    assert [str(c) for c in config_changes(push, wider)] == [
+        "env.task.goal.distance [0.08, 0.12] -> [0.05, 0.1]"]
+    planar = apply_sets(push, ["task.goal=!PlanarGoal {max_yaw: 0.5}"])
+    assert planar.env.task.goal == PlanarGoal(max_yaw=0.5)
+    with pytest.raises(InputError, match="heading_spread"):
+        apply_sets(planar, ["task.goal.heading_spread=0.1"])  # not a PlanarGoal field
