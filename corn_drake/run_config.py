@@ -132,7 +132,7 @@ def set_fields(cfg: TrainConfig, values: Mapping[str, Any], label: str) -> Train
         for section in sections:
             union = typing.get_origin((field_types(type(current)) or {}).get(section)) in (
                 typing.Union, types.UnionType)
-            current = getattr(current, section)
+            current = getattr(current, section, None)  # None: a key the loader will refuse
             # A section that is a tagged variant (task.goal) keeps the tag of the variant it
             # holds: an untagged mapping would load as the union's first variant.
             node = node.setdefault(section, TaggedMapping(type(current).__name__, {})

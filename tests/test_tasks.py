@@ -240,3 +240,5 @@ def test_set_changes_a_field_of_the_task_goal_variant_or_the_variant():
     assert planar.env.task.goal == PlanarGoal(max_yaw=0.5)
     with pytest.raises(InputError, match="heading_spread"):
         apply_sets(planar, ["task.goal.heading_spread=0.1"])  # not a PlanarGoal field
+    with pytest.raises(InputError, match="bogus"):
+        apply_sets(planar, ["task.goal.bogus.deeper=1"])
