@@ -124,10 +124,11 @@ def resting_pose(spec: ObjectSpec, xy, yaw: float, on_side: bool = False) -> Rig
     return RigidTransform(RotationMatrix(RollPitchYaw(0.0, 0.0, yaw)) @ R0, [xy[0], xy[1], z])
 
 
-def scripted_push(spec: ObjectSpec, duration: float = 10.0, period: float = 0.1,
+def slide_and_turn_poses(spec: ObjectSpec, duration: float = 10.0, period: float = 0.1,
                   start=(-0.08, 0.06), shift=(0.15, -0.10), turn: float = 1.2,
                   on_side: bool = False) -> list[RigidTransform]:
-    """Poses of a push that slides the object by `shift` and turns it by `turn` rad.
+    """A kinematic pose sequence (no controller, no physics) of the object resting on the table
+    while it slides by `shift` and turns by `turn` rad, as a push would move it.
 
     Smooth start and stop (smoothstep), so the speed peaks at 1.5x its mean mid-push.
     """

@@ -24,8 +24,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 from corn_drake import DIAGRAMS_DIR
-from corn_drake.config import (TeacherDiagramConfig, TrainConfig, config_fields, field_types,
-                               load_config, load_config_string)
+from corn_drake.config import (TaggedMapping, TeacherDiagramConfig, TrainConfig, config_fields,
+                               dump_tagged_yaml, field_types, load_config, load_config_string,
+                               read_tagged_yaml)
 from corn_drake.errors import InputError, MissingInputError
 
 BASE_DIAGRAM = DIAGRAMS_DIR / "teacher_rollout.yaml"
@@ -124,16 +125,20 @@ def resolve_key(key: str, label: str) -> tuple[str, Any]:
 
 def set_fields(cfg: TrainConfig, values: Mapping[str, Any], label: str) -> TrainConfig:
     """`cfg` with typed `values` ({dotted field: value}) loaded on top as one layer."""
-    import yaml
-
     data: dict = {}
     for key, value in values.items():
         *sections, leaf = resolve_key(key, label)[0].split(".")
-        node = data
+        node, current = data, cfg
         for section in sections:
-            node = node.setdefault(section, {})
+            union = typing.get_origin((field_types(type(current)) or {}).get(section)) in (
+                typing.Union, types.UnionType)
+            current = getattr(current, section, None)  # None: a key the loader will refuse
+            # A section that is a tagged variant (task.goal) keeps the tag of the variant it
+            # holds: an untagged mapping would load as the union's first variant.
+            node = node.setdefault(section, TaggedMapping(type(current).__name__, {})
+                                   if union else {})
         node[leaf] = value
-    return load_config_string(yaml.safe_dump(data), TrainConfig, label, defaults=cfg)
+    return load_config_string(dump_tagged_yaml(data), TrainConfig, label, defaults=cfg)
 
 
 def apply_sets(cfg: TrainConfig, items: Iterable[str], only: str | None = None,
@@ -153,7 +158,7 @@ def apply_sets(cfg: TrainConfig, items: Iterable[str], only: str | None = None,
         if only is not None and not key.startswith(f"{only}."):
             raise InputError(f"{label}: only {only}.* settings apply here")
         try:
-            value = yaml.safe_load(text)
+            value = read_tagged_yaml(text)  # a variant's tag too: task.goal='!PlanarGoal {}'
         except yaml.YAMLError as e:
             raise InputError(f"{label}: the value is not valid YAML ({' '.join(str(e).split())})"
                              ) from None

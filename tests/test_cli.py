@@ -3,11 +3,10 @@
 import json
 from pathlib import Path
 
-from corn_drake import DIAGRAMS_DIR
 from corn_drake.cli import build_parser, main
 
-# The push-from-behind benchmark's task overlay.
-PUSH_TASK = str(DIAGRAMS_DIR / "reduced_benchmark_push.yaml")
+# The push-from-behind task overlay (diagrams/tasks/push.yaml).
+PUSH_TASK = "push"
 
 
 def test_subcommands_are_discovered():

@@ -136,12 +136,12 @@ def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_p
 @pytest.mark.parametrize("record", ["0", "1"])
 def test_evaluate_refuses_an_unwritable_destination_before_any_episode(
         tmp_path, capsys, monkeypatch, record):
-    from corn_drake.commands import evaluate
+    from corn_drake import evaluation
 
     def no_episode(*args, **kwargs):
         raise AssertionError("episodes ran before the destination was checked")
 
-    monkeypatch.setattr(evaluate, "evaluate", no_episode)
+    monkeypatch.setattr(evaluation, "evaluate", no_episode)
     capsys.readouterr()
     blocker = tmp_path / "a_file"
     blocker.write_text("")

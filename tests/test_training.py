@@ -159,7 +159,7 @@ def test_envs_move_through_every_train_object(tmp_path):
     for _ in range(6):  # 3 episodes per env
         result = batch.step(np.zeros((4, 20)))
         episodes += result.episode_stats
-        first_poses += [batch.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+        first_poses += [batch.envs[i].episode.initial_object_pose for i in result.final_obs]
     assert len(episodes) == 12 and {e["object"] for e in episodes} == set(train_ids)
     for _ in range(18):  # into the second round of objects
         batch.step(np.zeros((4, 20)))
@@ -178,7 +178,7 @@ def test_envs_move_through_every_train_object(tmp_path):
     for _ in range(6):
         result = again.step(np.zeros((4, 20)))
         replay += result.episode_stats
-        replay_poses += [again.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+        replay_poses += [again.envs[i].episode.initial_object_pose for i in result.final_obs]
     assert [e["object"] for e in replay] == [e["object"] for e in episodes]
     np.testing.assert_allclose(replay_poses, first_poses)
 

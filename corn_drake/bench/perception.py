@@ -1,10 +1,10 @@
 """`corn-drake bench perception --report FILE.json`: frames/s of the whole perception chain.
 
 One frame = render 3 depth cameras -> 3 world-frame clouds -> segmentation (geometric: crop,
-table, robot links, outliers, DBSCAN) -> one ICP tracker update, on a scripted push of the
-default box with the arm in view, at the configured (default) resolution. The per-stage mean
-times come from evaluating the stages one after the other (Drake caches each output, so each
-stage's time excludes the stages before it). Goal: >= 30 frames/s.
+table, robot links, outliers, DBSCAN) -> one ICP tracker update, on a slide-and-turn pose
+sequence of the default box with the arm in view, at the configured (default) resolution. The
+per-stage mean times come from evaluating the stages one after the other (Drake caches each
+output, so each stage's time excludes the stages before it). Goal: >= 30 frames/s.
 """
 
 from __future__ import annotations
@@ -31,12 +31,12 @@ def add_arguments(parser):
 
 
 def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
-    from corn_drake.perception_harness import PerceptionHarness, scripted_push
+    from corn_drake.perception_harness import PerceptionHarness, slide_and_turn_poses
 
     harness = PerceptionHarness(cfg)
     spec = harness.scene.object_spec
     period = harness.frame_period
-    poses = scripted_push(spec, duration=frames * period, period=period)
+    poses = slide_and_turn_poses(spec, duration=frames * period, period=period)
     harness.set_object(poses[0])
     harness.reset_tracker()
     harness.track()  # first frame: renderer warm-up and tracker initialization

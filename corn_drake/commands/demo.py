@@ -2,7 +2,7 @@
 
 1. object library: one procedural object per family (train + unseen families);
 2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
-4. PPO teacher (`corn` policy, frozen encoder) on the reduced benchmark over the train objects;
+4. PPO teacher (`corn` policy, frozen encoder) on the planar task over the train objects;
 5. evaluation in the evaluation diagram on an unseen object, recorded to Meshcat HTML;
 plus a scripted push recording and the simulation-speed report. Every stage writes under --out
 and is skipped when its output is already complete, so a killed demo resumes.
@@ -13,11 +13,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from corn_drake import DIAGRAMS_DIR
 from corn_drake.cli_types import nonnegative_int, positive_int
 
-# The teacher's task: the planar reduced benchmark (learnable in the demo's few minutes).
-TASK = DIAGRAMS_DIR / "reduced_benchmark.yaml"
+# The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
+TASK = "planar"
 
 NAME = "demo"
 HELP = "run the pipeline end to end at a small default size; prints where each output went"
@@ -50,9 +49,9 @@ def run(args) -> int:
     from corn_drake.contact.pretrain import Pretrainer
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.diagrams import load_teacher_config
+    from corn_drake.evaluation import run_episode
     from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.rollout import run_episode
-    from corn_drake.rl.scripted import ScriptedPush
+    from corn_drake.rl.scripted import ScriptedPushAgent
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -85,7 +84,7 @@ def run(args) -> int:
     _stage("4/6 teacher PPO (corn)", outputs, t0)
     run_dir = out / "teacher_corn"
     # The demo's pretraining is a few hundred steps: its encoder is below the F1 bar by design.
-    cli(["train", "--policy", "corn", "--task", str(TASK), "--objects", str(library.resolve()),
+    cli(["train", "--policy", "corn", "--task", TASK, "--objects", str(library.resolve()),
          "--encoder", str(pre / "encoder.pt"), "--allow-weak-encoder",
          "--steps", str(args.train_steps), "--envs-per-worker", "8", "--rollout-steps", "32",
          "--seed", str(args.seed), "--out", str(run_dir), "--no-progress"])
@@ -103,14 +102,8 @@ def run(args) -> int:
 
     _stage("6/6 scripted push + simulation speed", outputs, t0)
     env = TeacherEnv(load_teacher_config(), meshcat=Meshcat())
-    pushes = {}
-
-    def on_reset(_obs):
-        start = env.episode_info["initial_object_pose"][:3]
-        pushes["policy"] = ScriptedPush.toward_table_centre(env.cfg.controller, start[:2])
-
-    result = run_episode(env, lambda obs: pushes["policy"](obs["hand_state"]), seed=3,
-                         max_steps=60, record_path=out / "scripted_push.html", on_reset=on_reset)
+    result = run_episode(env, ScriptedPushAgent(env.cfg.controller), seed=3, max_steps=60,
+                         record_path=out / "scripted_push.html")
     outputs["scripted push recording (Meshcat HTML)"] = result.recording
     bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0,
                                    "policy": None})()

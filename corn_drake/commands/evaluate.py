@@ -12,10 +12,7 @@ The report's folder (and the recordings') are checked writable before the first 
 from __future__ import annotations
 
 import dataclasses
-from collections import defaultdict
 from pathlib import Path
-
-import numpy as np
 
 from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.errors import InputError
@@ -71,58 +68,10 @@ def _object_specs(args, cfg):
     return [(i, load_object_spec(library, i)) for i in ids]
 
 
-def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path) -> dict:
-    from pydrake.geometry import Meshcat
-
-    from corn_drake.rl.env import TeacherEnv
-
-    meshcat = Meshcat() if record > 0 else None
-    per_object, rows = defaultdict(list), []
-    envs = {}
-    for k in range(episodes):
-        object_id, spec = objects[k % len(objects)]
-        if object_id not in envs:
-            envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat, agent)
-        env = envs[object_id]
-        env.reset(seed=seed + k)
-        recording = None
-        if k < record:
-            env.start_recording()
-        steps, ret, status, info = env.run_closed_loop()
-        if k < record:
-            recording = str(env.save_recording(out_dir / f"episode_{k:03d}_{object_id}.html"))
-        success = bool(status.get("success", 0) > 0)
-        per_object[object_id].append(success)
-        rows.append({"episode": k, "object": object_id, "success": success, "steps": steps,
-                     "return": ret, "position_error": status.get("position_error"),
-                     "orientation_error": status.get("orientation_error"),
-                     "sim_error": info.get("sim_error"), "recording": recording})
-    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
-    return {"success_rate": float(np.mean([r["success"] for r in rows])),
-            "balanced_success_rate": float(np.mean(list(rates.values()))),
-            "per_object": rates,
-            "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
-            "episodes": rows}
-
-
-def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
-    """Group -> {success_rate, episodes, objects} over report rows; `groups` maps object id -> group
-    (assets.library.object_groups), so "unseen" splits into new families and new members."""
-    from corn_drake.errors import InputError
-
-    by_group: dict[str, list[dict]] = defaultdict(list)
-    for row in episodes:
-        if row["object"] not in groups:
-            raise InputError(f"episode {row['episode']}: object {row['object']!r} has no group")
-        by_group[groups[row["object"]]].append(row)
-    return {g: {"success_rate": float(np.mean([r["success"] for r in rows])),
-                "episodes": len(rows), "objects": len({r["object"] for r in rows})}
-            for g, rows in sorted(by_group.items())}
-
-
 def run(args) -> int:
     from corn_drake.config import TrainConfig
     from corn_drake.errors import InputError
+    from corn_drake.evaluation import evaluate, success_by_group
     from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
     from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
@@ -164,8 +113,7 @@ def run(args) -> int:
           + "".join(f"; {change}" for change in overrides))
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
-    report.update({"run": str(args.run), "policy": policy, "task": cfg.task.name,
-                   "action_step": cfg.controller.max_position_delta,
+    report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],
                    "split": args.split, "actions": "sampled" if args.stochastic else "mean"})
     if args.objects:
