@@ -16,6 +16,7 @@ import math
 from pydrake.systems.sensors import CameraConfig
 
 from corn_drake.config import TeacherDiagramConfig
+from corn_drake.contract import ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
 
 # The authors' three eyes (official code), in the table frame = our world frame.
@@ -230,9 +231,9 @@ class TrackerConfig:
                                  f"got {value}")
 
 
-# The policy's cloud normalisation (x - (0, 0, 0.55)) / 0.4 (rl/agent.py CLOUD_SCALE): the
-# paper's observation noises are stated in those units.
-NORMALISED_UNIT_M = 0.4
+# The encoders' input normalisation divides positions by this (contract.ENCODER_INPUT_SCALE):
+# the paper's observation noises are stated in those units.
+NORMALISED_UNIT_M = ENCODER_INPUT_SCALE
 
 
 @dc.dataclass

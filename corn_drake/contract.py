@@ -14,7 +14,12 @@ Observation (teacher, privileged), one entry per key:
   physics          (5,)    mass, table / object / finger friction, restitution
   object_keypoints (24,)   the 8 bounding-box corners at the current pose, world frame
 The student sees cloud (partial, from the cameras), hand_state, robot_state, previous_action
-and goal (relative to the tracker's estimate).
+and goal (relative to the tracker's estimate), with the teacher's shapes
+(student_observation_shapes).
+
+Encoder input normalisation: points and the hand position enter the encoders as
+(x - ENCODER_INPUT_CENTER) / ENCODER_INPUT_SCALE. nn/input_normalization.py turns these numbers
+into the module every encoder carries; encoder.pt saves the values it was pretrained with.
 
 Action (normalised to [-1, 1]): EE translation residual (3, world), axis-angle residual
 (3, world), joint stiffness kp (7), damping ratio rho (7).
@@ -33,6 +38,10 @@ POSE9_DIM = 9  # position + 6D rotation
 POSE7_DIM = 7  # position + quaternion wxyz (Drake's pose order in our sources: p then q)
 HAND_STATE_DIM = POSE9_DIM
 GOAL_DIM = POSE9_DIM
+POSITION_DIM = 3
+# Inside a pose9 (hand_state, goal): the position, then the 6D rotation.
+POSE9_POSITION = slice(0, POSITION_DIM)
+POSE9_ROTATION = slice(POSITION_DIM, POSE9_DIM)
 PHYSICS_DIM = 5
 NUM_KEYPOINTS = 8  # bounding-box corners
 KEYPOINTS_DIM = 3 * NUM_KEYPOINTS
@@ -76,9 +85,27 @@ def observation_size(key: str, num_points: int = DEFAULT_NUM_POINTS) -> int:
     return int(np.prod(observation_shapes(num_points)[key]))
 
 
+def student_observation_shapes(num_points: int = DEFAULT_NUM_POINTS) -> dict[str, tuple[int, ...]]:
+    """Shape of each student observation key: the teacher's shape of the same key."""
+    shapes = observation_shapes(num_points)
+    return {k: shapes[k] for k in STUDENT_OBS_KEYS}
+
+
+def slice_size(s: slice) -> int:
+    """Number of entries of a layout slice (one with explicit start and stop)."""
+    return s.stop - s.start
+
+
 CONTEXT_DIM = sum(observation_size(k) for k in CONTEXT_KEYS)
 # The `state` baseline's object features: bounding-box keypoints + hand pose.
 STATE_FEATURE_DIM = KEYPOINTS_DIM + HAND_STATE_DIM
+
+# --- encoder input normalisation ------------------------------------------------------------
+# The only normalisation any encoder of this project has been pretrained with: centre above the
+# table (top at z = 0.4) and scale 0.4 m, so the workspace maps to about [-1, 1]. encoder.pt
+# files saved before the normalisation was stored in them were all made with these values.
+ENCODER_INPUT_CENTER = (0.0, 0.0, 0.55)
+ENCODER_INPUT_SCALE = 0.4
 
 
 def free_body_pose(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

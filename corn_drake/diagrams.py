@@ -22,6 +22,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
 from corn_drake.config import ObjectConfig, TeacherDiagramConfig
+from corn_drake.contract import ACTION_DIM, NUM_JOINTS
 from corn_drake.errors import InputError
 from corn_drake.run_config import load_env_config
 from corn_drake.scene.builder import Scene, build_scene
@@ -169,7 +170,7 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
     builder.Connect(ctrl.GetOutputPort("actuation"), plant.get_actuation_input_port(scene.panda))
     if with_noise:
         noise = builder.AddNamedSystem("torque_noise", RandomSource(
-            RandomDistribution.kGaussian, 7, physics.time_step))
+            RandomDistribution.kGaussian, NUM_JOINTS, physics.time_step))
         builder.Connect(noise.get_output_port(), ctrl.GetInputPort("unit_noise"))
 
     obs = builder.AddNamedSystem("observations", TeacherObservations(n_pts, cfg.scene.robot_base))
@@ -201,24 +202,35 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
 
 
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
-                          meshcat=None, agent=None) -> TeacherDiagram:
+                          meshcat=None, agent=None, stochastic_policy: bool = False) -> TeacherDiagram:
     """The teacher rollout diagram; the action is the exported input `controller.action`.
 
     With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
-    (the evaluation diagram, `corn-drake evaluate`) and there is no action input.
+    (the evaluation diagram, `corn-drake evaluate`) and there is no action input. With
+    `stochastic_policy`, it samples its actions: a RandomSource named "policy_noise" feeds it
+    N(0, 1) draws, a fresh one every policy period (reseed_random_sources seeds it per episode).
     """
+    from corn_drake.systems.policy import PolicySystem, SampledActions
+
+    if isinstance(agent, SampledActions):
+        agent, stochastic_policy = agent.agent, True
+    if stochastic_policy and agent is None:
+        raise ValueError("stochastic_policy needs an agent: without one the action is an input")
     cfg = cfg or load_teacher_config()
     builder = DiagramBuilder()
     handles = add_teacher_systems(builder, cfg, spec)
     if agent is None:
         builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
     else:
-        from corn_drake.systems.policy import PolicySystem
-
-        policy = builder.AddNamedSystem("policy", PolicySystem(agent, cfg.scene.object.cloud_points))
+        policy = builder.AddNamedSystem("policy", PolicySystem(
+            agent, cfg.scene.object.cloud_points, stochastic=stochastic_policy))
         builder.Connect(handles.observations.GetOutputPort("observation"),
                         policy.GetInputPort("observation"))
         builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
+        if stochastic_policy:
+            noise = builder.AddNamedSystem("policy_noise", RandomSource(
+                RandomDistribution.kGaussian, ACTION_DIM, clock_of(cfg.scene.physics).period))
+            builder.Connect(noise.get_output_port(), policy.GetInputPort("unit_noise"))
         handles.policy = policy
     if meshcat is not None:
         from corn_drake.viz.meshcat import add_meshcat_visualizer

@@ -27,13 +27,23 @@ def rotation_angle(R: np.ndarray) -> float:
     return float(np.arccos(np.clip(c, -1.0, 1.0)))
 
 
+def quat_matrix_entries(w, x, y, z) -> tuple:
+    """The 9 entries (row after row) of the rotation matrix of a unit quaternion (w, x, y, z).
+
+    Plain arithmetic, so the same formula serves numpy arrays here and torch tensors in
+    nn/geometry.py: each array library only stacks the entries its own way."""
+    return (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y))
+
+
 def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) in Drake's w, x, y, z order;
+    normalised first, so any nonzero scaling of a quaternion gives the same rotation."""
+    q = np.asarray(q, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    entries = quat_matrix_entries(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+    return np.stack(entries, axis=-1).reshape(*q.shape[:-1], 3, 3)
 
 
 def yaw_matrix(yaw: float) -> np.ndarray:

@@ -289,5 +289,6 @@ def test_ingest_resumes_a_manifest_without_bookkeeping_keys(tmp_path):
     (source / "broken.obj").write_text("this is no mesh\n")
     (out / "manifest.json").write_text(json.dumps({"objects": []}))
     manifest = ingest_folder(source, out, progress=False)
-    assert [r["source"] for r in manifest["rejected"]] == ["broken.obj"]
-    assert json.loads((out / "manifest.json").read_text())["rejected"] == manifest["rejected"]
+    assert [r.source for r in manifest.rejected] == ["broken.obj"]
+    on_disk = json.loads((out / "manifest.json").read_text())["rejected"]
+    assert on_disk == [{"source": r.source, "reason": r.reason} for r in manifest.rejected]

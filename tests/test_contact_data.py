@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from corn_drake.contact.generate import _quat_to_matrix
+from corn_drake.transforms import quat_wxyz_to_matrix
 from corn_drake.contact.runner import generate_dataset
 from corn_drake.contact.shards import load_split, read_shard
 from corn_drake.scene.gripper import gripper_boxes
@@ -43,7 +43,7 @@ def test_labels_match_an_independent_mesh_occupancy_check(dataset):
     root, _, _ = dataset
     data = load_split(root / "data", "train")
     pts, labels = data["points"][:300].astype(np.float64), data["labels"][:300]
-    R = _quat_to_matrix(data["hand_pose"][:300, 3:])
+    R = quat_wxyz_to_matrix(data["hand_pose"][:300, 3:])
     tool = np.einsum("nji,nmj->nmi", R, pts - data["hand_pose"][:300, None, :3]).reshape(-1, 3)
     inside = np.zeros(len(tool), bool)
     for box in gripper_boxes():

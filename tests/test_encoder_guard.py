@@ -8,12 +8,12 @@ import torch
 
 from corn_drake.cli import main as cli
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import load_frozen_encoder, make_encoder, save_encoder
+from corn_drake.nn.encoder_io import load_frozen_encoder, make_encoder, make_policy_encoder, save_encoder
 from corn_drake.rl.encoders import MIN_CONTACT_F1, contact_f1, load_encoder
 
 
 def _export(path, kind, **metrics):
-    save_encoder(path, kind, make_encoder(kind), pretraining=metrics or None)
+    save_encoder(path, make_policy_encoder(kind), pretraining=metrics or None)
     return path
 
 
@@ -35,10 +35,17 @@ def test_an_encoder_below_the_bar_is_refused_naming_it(tmp_path, policy, kind):
 
 def test_a_learned_encoder_is_accepted_and_weak_ones_only_with_the_flag(tmp_path, capsys):
     good = _export(tmp_path / "good.pt", "pointnet", unseen_patch_f1=MIN_CONTACT_F1 + 0.01)
-    assert load_encoder("pn", good) is not None
+    loaded = load_encoder("pn", good)
+    assert loaded.kind == "pointnet" and loaded.pretraining["unseen_patch_f1"] > MIN_CONTACT_F1
     weak = _export(tmp_path / "weak.pt", "pointnet", unseen_patch_f1=0.2)
     assert load_encoder("pn", weak, allow_weak=True) is not None
     assert "0.200" in capsys.readouterr().err  # the override is never silent
+
+
+def test_an_encoder_of_the_wrong_kind_is_refused(tmp_path):
+    pointnet = _export(tmp_path / "pn.pt", "pointnet", unseen_patch_f1=0.95)
+    with pytest.raises(InputError, match=r"needs a corn encoder.*pn\.pt holds a pointnet"):
+        load_encoder("corn", pointnet)
 
 
 def test_unseen_f1_is_preferred_and_nan_falls_back_to_held_out():

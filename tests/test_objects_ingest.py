@@ -35,11 +35,11 @@ def ingested(tmp_path_factory):
 
 
 def _reason(manifest, name):
-    return next((r["reason"] for r in manifest["rejected"] if r["source"].endswith(name)), None)
+    return next((r.reason for r in manifest.rejected if r.source.endswith(name)), None)
 
 
 def _object(manifest, name):
-    return next((o for o in manifest["objects"] if o["source"].endswith(name)), None)
+    return next((o for o in manifest.objects if o.source.endswith(name)), None)
 
 
 def test_unusable_inputs_are_rejected_with_reasons(ingested):
@@ -52,13 +52,13 @@ def test_unusable_inputs_are_rejected_with_reasons(ingested):
 
 def test_repairable_inputs_become_objects_with_warnings(ingested):
     huge = _object(ingested, "huge.off")
-    assert huge and any("rescaled" in w for w in huge["warnings"])
-    assert 0.05 <= huge["radius"] <= 0.10
+    assert huge and any("rescaled" in w for w in huge.warnings)
+    assert 0.05 <= huge.radius <= 0.10
     two = _object(ingested, "two_bodies.obj")
-    assert two and any("largest" in w for w in two["warnings"])
+    assert two and any("largest" in w for w in two.warnings)
     open_box = _object(ingested, "open_box.ply")
-    assert open_box is not None and open_box["num_stable_poses"] > 0
+    assert open_box is not None and open_box.num_stable_poses > 0
     # Everything that was not rejected is a complete object.
-    for o in ingested["objects"]:
-        assert o["num_stable_poses"] > 0 and o["hulls"]
-    assert len(ingested["objects"]) + len(ingested["rejected"]) == 8  # every input accounted for
+    for o in ingested.objects:
+        assert o.num_stable_poses > 0 and o.hulls
+    assert len(ingested.objects) + len(ingested.rejected) == 8  # every input accounted for

@@ -1,5 +1,7 @@
 """A small procedural library: manifest, files, clouds on the surface, stable poses, scene use."""
 
+import json
+
 import numpy as np
 import open3d as o3d
 import pytest
@@ -9,14 +11,17 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from corn_drake.assets.library import build_procedural, list_objects, load_object_spec, read_manifest
+from corn_drake.assets.manifest import write_manifest
 from corn_drake.assets.process import ProcessConfig
 from corn_drake.config import SceneConfig, TeacherDiagramConfig
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
-KEYS = {"id", "source", "family", "split", "unseen_group", "radius", "mass", "thin", "hulls", "visual", "cloud",
-        "stable_poses"}
+# Every field a built object must carry (unseen_group is None for train objects).
+BUILT_FIELDS = ("id", "source", "family", "split", "radius", "mass", "thin", "hulls", "visual",
+                "cloud", "stable_poses", "bbox_corners", "unit_inertia", "num_hulls",
+                "num_stable_poses", "drops", "stable_pose_kept_fraction", "hull_volume_ratio")
 
 
 @pytest.fixture(scope="module")
@@ -31,37 +36,46 @@ def library(tmp_path_factory):
 
 def test_manifest_files_and_splits(library):
     manifest = read_manifest(library)
-    assert manifest["objects"] and set(o["split"] for o in manifest["objects"]) == {"train", "unseen"}
-    for o in manifest["objects"]:
-        assert KEYS <= set(o)
-        assert 0.05 - 1e-9 <= o["radius"] <= 0.10 + 1e-9
-        cloud = np.load(library / o["cloud"])
+    assert manifest.objects and set(o.split for o in manifest.objects) == {"train", "unseen"}
+    for o in manifest.objects:
+        assert all(getattr(o, f) not in (None, "") for f in BUILT_FIELDS), o
+        assert o.extra == {}  # the builder writes only fields the schema names
+        assert 0.05 - 1e-9 <= o.radius <= 0.10 + 1e-9
+        cloud = np.load(library / o.cloud)
         assert cloud.shape == (2048, 6)
-        poses = np.load(library / o["stable_poses"])
-        assert poses.shape == (o["num_stable_poses"], 7) and len(poses) > 0
+        poses = np.load(library / o.stable_poses)
+        assert poses.shape == (o.num_stable_poses, 7) and len(poses) > 0
         assert np.allclose(poses[:, :2], 0) and np.all(poses[:, 2] > 0.4)
-        assert 1 <= len(o["hulls"]) <= 16 and all((library / h).is_file() for h in o["hulls"])
+        assert 1 <= len(o.hulls) <= 16 and all((library / h).is_file() for h in o.hulls)
     assert sorted(list_objects(library, "unseen") + list_objects(library, "train")) == \
-        sorted(o["id"] for o in manifest["objects"])
+        sorted(o.id for o in manifest.objects)
+
+
+def test_manifest_round_trips_through_the_typed_schema(library, tmp_path):
+    manifest = read_manifest(library)
+    write_manifest(tmp_path, manifest)
+    assert read_manifest(tmp_path) == manifest
+    assert json.loads((tmp_path / "manifest.json").read_text()) == \
+        json.loads((library / "manifest.json").read_text())
 
 
 def test_clouds_lie_on_the_surface(library):
-    for o in read_manifest(library)["objects"][:6]:
-        mesh = trimesh.load(library / o["visual"], force="mesh")
-        cloud = np.load(library / o["cloud"])
+    for o in read_manifest(library).objects[:6]:
+        mesh = trimesh.load(library / o.visual, force="mesh")
+        cloud = np.load(library / o.cloud)
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(mesh.vertices), o3d.utility.Vector3iVector(mesh.faces))))
         distance = scene.compute_distance(o3d.core.Tensor(cloud[:, :3].astype(np.float32))).numpy()
-        assert distance.max() < 1e-4 * o["radius"] + 1e-6  # float32 queries
+        assert distance.max() < 1e-4 * o.radius + 1e-6  # float32 queries
         assert np.allclose(np.linalg.norm(cloud[:, 3:], axis=1), 1.0, atol=1e-6)
 
 
 def test_convex_family_hulls_match_the_mesh_volume(library):
-    for o in read_manifest(library)["objects"]:
-        assert o["hull_volume_ratio"] >= 0.99
-        if o["num_hulls"] == 1:
-            assert o["hull_volume_ratio"] == pytest.approx(1.0, abs=1e-3)
+    for o in read_manifest(library).objects:
+        assert o.hull_volume_ratio >= 0.99
+        if o.num_hulls == 1:
+            assert o.hull_volume_ratio == pytest.approx(1.0, abs=1e-3)
 
 
 def test_stored_stable_poses_are_stable_in_the_training_plant(library):

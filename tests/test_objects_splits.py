@@ -5,19 +5,20 @@ from collections import Counter
 import pytest
 
 from corn_drake.assets.families import FAMILIES, UNSEEN_FAMILIES
+from corn_drake.assets.manifest import LibraryObject
 from corn_drake.assets.splits import assign_splits, held_out_count
 from corn_drake.errors import InputError
 
 
-def _procedural(num: int) -> list[dict]:
-    """Manifest entries as build_procedural names them (families round-robin)."""
+def _procedural(num: int) -> list[LibraryObject]:
+    """Library objects as build_procedural names them (families round-robin)."""
     families = sorted(FAMILIES)
-    return [{"id": f"{families[i % len(families)]}_{i // len(families):03d}",
-             "family": families[i % len(families)]} for i in range(num)]
+    return [LibraryObject(id=f"{families[i % len(families)]}_{i // len(families):03d}",
+                          family=families[i % len(families)]) for i in range(num)]
 
 
 def _unseen(objects):
-    return {o["id"] for o in objects if o["split"] == "unseen"}
+    return {o.id for o in objects if o.split == "unseen"}
 
 
 def test_eighty_objects_hold_out_two_families_and_members_of_every_other():
@@ -25,19 +26,19 @@ def test_eighty_objects_hold_out_two_families_and_members_of_every_other():
     assign_splits(objects, seed=0)
     by_family = {}
     for o in objects:
-        by_family.setdefault(o["family"], []).append(o)
+        by_family.setdefault(o.family, []).append(o)
     assert len(UNSEEN_FAMILIES) == 2
     for family, members in by_family.items():
-        splits = Counter(o["split"] for o in members)
+        splits = Counter(o.split for o in members)
         if family in UNSEEN_FAMILIES:
             assert splits == {"unseen": len(members)}
-            assert {o["unseen_group"] for o in members} == {"family"}
+            assert {o.unseen_group for o in members} == {"family"}
         else:
             # The old every-8th-member rule held out none of 5-6 members.
             assert splits["unseen"] >= 1 and splits["train"] >= 1, family
-            assert {o["unseen_group"] for o in members if o["split"] == "unseen"} == {"member"}
-        assert all(o["unseen_group"] is None for o in members if o["split"] == "train")
-    member_unseen = sum(o["unseen_group"] == "member" for o in objects)
+            assert {o.unseen_group for o in members if o.split == "unseen"} == {"member"}
+        assert all(o.unseen_group is None for o in members if o.split == "train")
+    member_unseen = sum(o.unseen_group == "member" for o in objects)
     assert 12 <= member_unseen <= 24  # about a fifth of the 68 non-held-out members
 
 
@@ -49,14 +50,14 @@ def test_split_is_deterministic_in_the_seed_and_the_seed_matters():
     assert _unseen(a) == _unseen(b)
     assert _unseen(a) != _unseen(c)
     # The seed picks members, never the held-out families.
-    assert {o["family"] for o in c if o["unseen_group"] == "family"} == UNSEEN_FAMILIES
+    assert {o.family for o in c if o.unseen_group == "family"} == UNSEEN_FAMILIES
 
 
 def test_resplitting_in_another_order_gives_the_same_split():
     """The library re-applies the rule over the manifest after every object."""
     objects = _procedural(40)
     assign_splits(objects, seed=1)
-    shuffled = [dict(o) for o in reversed(objects)]
+    shuffled = [LibraryObject(id=o.id, family=o.family) for o in reversed(objects)]
     assign_splits(shuffled, seed=1)
     assert _unseen(shuffled) == _unseen(objects)
 
@@ -67,19 +68,19 @@ def test_small_families_train_on_all_members_and_large_ones_keep_training_member
     assert held_out_count(3, fraction=0.9) == 2  # at least one member always trains
     objects = _procedural(28)  # two members per family
     assign_splits(objects, seed=0)
-    assert all(o["split"] == "train" for o in objects if o["family"] not in UNSEEN_FAMILIES)
+    assert all(o.split == "train" for o in objects if o.family not in UNSEEN_FAMILIES)
 
 
 def test_ingested_meshes_get_their_own_group():
-    objects = [{"id": f"mesh_{i}", "family": "ingested"} for i in range(10)]
+    objects = [LibraryObject(id=f"mesh_{i}", family="ingested") for i in range(10)]
     assign_splits(objects, seed=0)
-    groups = Counter(o["unseen_group"] for o in objects)
+    groups = Counter(o.unseen_group for o in objects)
     assert groups == {None: 8, "ingested": 2}
 
 
 def test_bad_entries_and_fractions_are_named():
     with pytest.raises(InputError, match="family"):
-        assign_splits([{"id": "cuboid_000"}], seed=0)
+        assign_splits([LibraryObject(id="cuboid_000")], seed=0)
     with pytest.raises(InputError, match="fraction"):
         held_out_count(5, fraction=1.0)
 
@@ -89,7 +90,7 @@ def test_objects_command_summary_counts_unseen_by_group():
 
     objects = _procedural(80)
     assign_splits(objects, seed=0)
-    groups = Counter(o["unseen_group"] for o in objects)
+    groups = Counter(o.unseen_group for o in objects)
     summary = _split_summary(objects)
     assert summary.startswith(f"{groups[None]} train + {80 - groups[None]} unseen objects")
     assert f"{groups['family']} family" in summary and f"{groups['member']} member" in summary

@@ -84,10 +84,12 @@ def test_kept_fraction_is_the_share_of_training_poses_the_second_setting_keeps()
 
     assert kept_fraction({"verified": 4, "held_second_setting": 3}) == 0.75
     assert kept_fraction({"verified": 0, "held_second_setting": 0}) == 0.0
-    objects = [{"id": "stool", "drops": {"verified": 4, "held_second_setting": 3},
-                "stable_pose_kept_fraction": 0.75},
-               {"id": "cuboid_000", "drops": {"verified": 6, "held_second_setting": 6},
-                "stable_pose_kept_fraction": 1.0}]
+    from corn_drake.assets.manifest import LibraryObject
+
+    objects = [LibraryObject(id="stool", drops={"verified": 4, "held_second_setting": 3},
+                             stable_pose_kept_fraction=0.75),
+               LibraryObject(id="cuboid_000", drops={"verified": 6, "held_second_setting": 6},
+                             stable_pose_kept_fraction=1.0)]
     lines = _stable_pose_summary(objects)
     assert lines[0].startswith("stable poses holding under both contact settings: 9 of the 10")
     assert lines[1:] == ["  stool: kept 3 of 4 (75%)"]  # only objects that lost poses are listed

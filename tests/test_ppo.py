@@ -1,8 +1,10 @@
 """PPO on hand-made batches: GAE with time-outs, loss decreases, KL early stop, bound loss."""
 
+import pytest
 import torch
 from torch import nn
 
+from corn_drake.errors import InputError
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RewardScaler, RunningMeanStd
 from corn_drake.config import PPOConfig
@@ -114,6 +116,47 @@ def test_running_stats_and_reward_scaler():
     out = scaler(torch.tensor([2.0, 4.0]), torch.tensor([False, True]))
     assert out.shape == (2,) and torch.isfinite(out).all()
     assert scaler.returns[1] == 0  # reset where the episode ended
+
+
+def test_the_agent_normalises_its_context_with_the_one_running_mean_std():
+    """The agent's context normaliser is a RunningMeanStd module: its statistics are those of
+    everything it saw, they travel in the agent's state_dict, and a loaded agent normalises
+    the same way."""
+    from corn_drake.contract import CONTEXT_DIM
+    from corn_drake.rl.agent import TeacherAgent
+
+    torch.manual_seed(0)
+    agent = TeacherAgent("state")
+    assert isinstance(agent.context_normalizer, RunningMeanStd)
+    data = torch.randn(600, CONTEXT_DIM) * 3 + 2
+    for chunk in data.chunk(3):
+        agent.update_normalizer(chunk)
+    torch.testing.assert_close(agent.context_normalizer.mean.float(), data.mean(0), atol=1e-4, rtol=0)
+    state = agent.state_dict()
+    assert {"context_normalizer.mean", "context_normalizer.var", "context_normalizer.count"} <= set(state)
+    loaded = TeacherAgent("state")
+    loaded.load_state_dict(state)
+    probe = torch.randn(4, CONTEXT_DIM)
+    torch.testing.assert_close(loaded.normalized_context(probe), agent.normalized_context(probe))
+    assert not torch.allclose(TeacherAgent("state").normalized_context(probe),
+                              agent.normalized_context(probe))
+    # A checkpoint from before the normaliser was a module is refused, naming the file.
+    old = {k: v for k, v in state.items() if not k.startswith("context_normalizer.")}
+    old.update(ctx_mean=torch.zeros(CONTEXT_DIM), ctx_var=torch.ones(CONTEXT_DIM))
+    with pytest.raises(InputError, match="old_run/last.pt.*train the run again"):
+        loaded.load_saved_state(old, "old_run/last.pt")
+
+
+def test_reward_scaler_state_round_trips():
+    first = RewardScaler(3, 0.99)
+    rewards = torch.tensor([[1.0, -2.0, 0.5], [0.3, 0.1, -1.0], [2.0, 2.0, 2.0]])
+    dones = torch.tensor([[False, False, True], [False, True, False], [False, False, False]])
+    first(rewards[0], dones[0])
+    second = RewardScaler(3, 0.99)
+    second.load_state_dict(first.state_dict())
+    for r, d in zip(rewards[1:], dones[1:]):
+        torch.testing.assert_close(second(r, d), first(r, d))
+    torch.testing.assert_close(second.returns, first.returns)
 
 
 def test_lr_goes_down_when_updates_overshoot_the_kl_target():

@@ -8,10 +8,14 @@ import pytest
 import torch
 
 from corn_drake.config import PretrainConfig
-from corn_drake.contact.pretrain import Pretrainer, augment, hand9, patch_labels
+from corn_drake.contact.pretrain import Pretrainer, augment, hand9, patch_labels, prepare
 from corn_drake.contact.runner import generate_dataset
-from corn_drake.nn.encoder_io import load_frozen_encoder
+from corn_drake.contract import ENCODER_INPUT_CENTER, ENCODER_INPUT_SCALE
+from corn_drake.errors import InputError
+from corn_drake.nn.encoder_io import (NormalizedEncoder, load_frozen_encoder, make_encoder,
+                                      save_encoder)
 from corn_drake.nn.geometry import quat_wxyz_to_matrix
+from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics
 from tests.fixtures import write_tiny_library
 
@@ -38,9 +42,10 @@ def test_augmentation_moves_cloud_and_gripper_together():
     pts = torch.rand(4, 512, 3)
     q = torch.nn.functional.normalize(torch.randn(4, 4), dim=-1)
     pose = torch.cat([torch.rand(4, 3), q], -1)
-    new_pts, new_hand = augment(pts, pose, cfg, g)
+    norm = InputNormalization()
+    new_pts, new_hand = augment(pts, pose, cfg, g, norm)
     # Distances from the gripper to every point are preserved (a rigid motion of both).
-    before = torch.cdist(((pose[:, None, :3] - torch.tensor([0, 0, .55])) / .4), (pts - torch.tensor([0, 0, .55])) / .4)
+    before = torch.cdist(norm.points(pose[:, None, :3]), norm.points(pts))
     after = torch.cdist(new_hand[:, None, :3], new_pts)
     torch.testing.assert_close(before, after, atol=1e-5, rtol=0)
     # The hand's rotation turned by the same yaw as the cloud.
@@ -49,7 +54,7 @@ def test_augmentation_moves_cloud_and_gripper_together():
     assert torch.allclose(c0.norm(dim=-1), torch.ones(4), atol=1e-5)
     assert torch.allclose((c0 * c1).sum(-1), torch.zeros(4), atol=1e-5)
     assert torch.allclose(R0[..., 2, 0], c0[:, 2], atol=1e-5)  # yaw keeps the z components
-    assert torch.allclose(hand9(pose)[:, 3:].norm(dim=-1), torch.full((4,), math.sqrt(2)), atol=1e-5)
+    assert torch.allclose(hand9(pose, norm)[:, 3:].norm(dim=-1), torch.full((4,), math.sqrt(2)), atol=1e-5)
 
 
 def test_metrics_against_hand_computed_values():
@@ -74,6 +79,16 @@ def test_short_run_learns_resumes_and_exports(data, tmp_path):
     assert not any(p.requires_grad for p in encoder.parameters())
     tokens = encoder(torch.randn(2, 512, 3), torch.randn(2, 9))
     assert tokens.shape == (2, 17, 128)
+    # The export normalises world-frame inputs exactly as pretraining fed the network.
+    assert encoder.normalization.record() == first.normalization.record()
+    world = torch.rand(2, 512, 3) * 0.3 + 0.4
+    pose = torch.cat([torch.rand(2, 3) * 0.3 + 0.4, torch.nn.functional.normalize(torch.randn(2, 4), dim=-1)], -1)
+    pts, hand = prepare(world, pose, cfg, normalization=first.normalization)
+    first.model.eval()
+    with torch.no_grad():
+        expected = first.model.encoder(pts, hand)
+    hand_state = torch.cat([pose[:, :3], hand[:, 3:]], -1)  # world position + the same 6D
+    torch.testing.assert_close(encoder(world, hand_state), expected, atol=1e-5, rtol=1e-5)
     # Resume: a longer budget continues from step 60 with the saved optimizer state.
     cfg.steps = 70
     resumed = Pretrainer(cfg, data, tmp_path)
@@ -81,6 +96,50 @@ def test_short_run_learns_resumes_and_exports(data, tmp_path):
     assert resumed.optimizer.state_dict()["state"].keys() == first.optimizer.state_dict()["state"].keys()
     resumed.train(progress=False)
     assert json.loads((tmp_path / "metrics.json").read_text())["steps"] == 70
+
+
+def _pose_batch(n):
+    """World-frame clouds around the table and hand states (position + any 9-D rest)."""
+    return torch.rand(n, 512, 3) * 0.4 + 0.3, torch.cat([torch.rand(n, 3) * 0.4 + 0.3, torch.randn(n, 6)], -1)
+
+
+@pytest.mark.parametrize("kind", ["corn", "pointnet"])
+def test_encoder_round_trip_keeps_its_normalisation(tmp_path, kind):
+    """A saved encoder comes back with the normalisation it was saved with (here not the
+    default), and gives the same output on the same world-frame input."""
+    torch.manual_seed(0)
+    norm = InputNormalization((0.1, -0.2, 0.5), 0.3)
+    saved = NormalizedEncoder(kind, make_encoder(kind), norm).eval()
+    save_encoder(tmp_path / "encoder.pt", saved, pretraining={"steps": 3})
+    loaded = load_frozen_encoder(tmp_path / "encoder.pt")
+    assert loaded.kind == kind and loaded.pretraining == {"steps": 3}
+    assert loaded.normalization.record() == {"center": pytest.approx([0.1, -0.2, 0.5]),
+                                             "scale": pytest.approx(0.3)}
+    cloud, hand = _pose_batch(2)
+    with torch.no_grad():
+        torch.testing.assert_close(loaded(cloud, hand), saved(cloud, hand))
+        # ...and not what the default normalisation would give: the record is used.
+        default = NormalizedEncoder(kind, loaded.network, InputNormalization())
+        assert not torch.allclose(default(cloud, hand), saved(cloud, hand), atol=1e-4)
+
+
+def test_encoder_saved_before_the_normalisation_was_recorded_loads_with_the_one_used(tmp_path):
+    old = tmp_path / "old.pt"
+    torch.save({"kind": "corn", "state_dict": make_encoder("corn").state_dict(),
+                "pretraining": None}, old)
+    loaded = load_frozen_encoder(old)
+    assert loaded.normalization.record() == {"center": pytest.approx(list(ENCODER_INPUT_CENTER)),
+                                             "scale": pytest.approx(ENCODER_INPUT_SCALE)}
+
+
+@pytest.mark.parametrize("record", [{"center": [0, 0], "scale": 0.4}, {"center": [0, 0, 0.5], "scale": 0.0},
+                                    {"scale": 0.4}, "0.4"])
+def test_a_malformed_normalisation_record_is_named(tmp_path, record):
+    bad = tmp_path / "enc.pt"
+    torch.save({"kind": "corn", "state_dict": make_encoder("corn").state_dict(),
+                "normalization": record}, bad)
+    with pytest.raises(InputError, match="enc.pt"):
+        load_frozen_encoder(bad)
 
 
 def test_bad_encoder_checkpoint_is_named(tmp_path):

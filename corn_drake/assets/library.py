@@ -1,14 +1,14 @@
 """The object library on disk: building it (procedural or from a mesh folder) and reading it.
 
-DIR/manifest.json: {"objects": [{id, source, family, split, unseen_group, radius, mass, thin,
-hulls, visual, cloud, stable_poses, warnings, hull_repairs, stable_pose_kept_fraction, ...}],
-"rejected": [{source, reason}], "split_rule": {...}, "timings": {...}}. Paths are relative to
-DIR; every file is written atomically, and a re-run skips objects already in the manifest.
-Splits follow assets/splits.py and are re-assigned over the whole manifest at every save.
+DIR/manifest.json follows the typed schema of assets/manifest.py (Manifest, LibraryObject,
+Rejection). Paths are relative to DIR; every file is written atomically, and a re-run skips
+objects already in the manifest. Splits follow assets/splits.py and are re-assigned over the
+whole manifest at every save.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import zlib
 from pathlib import Path
@@ -17,11 +17,11 @@ import numpy as np
 
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
 from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
-from corn_drake.assets.manifest import manifest_path, read_manifest, require_fields
+from corn_drake.assets.manifest import (LibraryObject, Manifest, Rejection, manifest_path,
+                                        read_manifest, write_manifest)
 from corn_drake.assets.process import ProcessConfig, process_object
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.assets.splits import INGESTED_FAMILY, MEMBER_FRACTION, assign_splits
-from corn_drake.io_utils import write_json
 from corn_drake.scene.objects import ObjectSpec
 
 
@@ -31,61 +31,55 @@ SPEC_FIELDS = ("mass", "unit_inertia", "cloud", "stable_poses", "radius", "bbox_
 
 
 def list_objects(library: str | Path, split: str | None = None) -> list[str]:
-    return [o["id"] for o in read_manifest(library)["objects"] if split in (None, o["split"])]
+    return read_manifest(library).ids(split)
 
 
 def object_groups(library: str | Path) -> dict[str, str]:
     """Object id -> its group for per-group reports: the kind of unseen object ("family",
     "member", "ingested"), or the split ("train"; "unseen" in libraries built before groups)."""
-    return {o["id"]: o.get("unseen_group") or o["split"] for o in read_manifest(library)["objects"]}
+    return {o.id: o.unseen_group or o.split for o in read_manifest(library).objects}
 
 
 def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
     library = Path(library)
-    entries = {o["id"]: o for o in read_manifest(library)["objects"]}
-    if object_id not in entries:
-        raise InputError(f"object {object_id!r} not in library {library}")
-    e = entries[object_id]
-    require_fields(library, e, SPEC_FIELDS)
+    obj = read_manifest(library).get(library, object_id)
+    obj.require(library, SPEC_FIELDS)
 
     def array(key):
-        return _load_array(library, e, key)
+        return _load_array(library, obj, key)
 
-    return ObjectSpec(name=object_id, mass=float(e["mass"]),
+    return ObjectSpec(name=object_id, mass=float(obj.mass),
                       unit_inertia=array("unit_inertia"), com=np.zeros(3),
                       cloud=array("cloud"),
-                      stable_poses=array("stable_poses"), radius=float(e["radius"]),
+                      stable_poses=array("stable_poses"), radius=float(obj.radius),
                       bbox_corners=array("bbox_corners"),
-                      hull_paths=[library / h for h in e["hulls"]],
-                      visual_path=library / e["visual"], thin=bool(e["thin"]))
+                      hull_paths=[library / h for h in obj.hulls],
+                      visual_path=library / obj.visual, thin=bool(obj.thin))
 
 
-def _load_array(library: Path, entry: dict, key: str) -> np.ndarray:
-    path = library / entry[key]
+def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:
+    path = library / getattr(obj, key)
     try:
         return np.load(path, allow_pickle=False)
     except FileNotFoundError:
-        raise MissingInputError(f"object {entry['id']!r} of {manifest_path(library)}: "
+        raise MissingInputError(f"object {obj.id!r} of {manifest_path(library)}: "
                                 f"{key} file not found: {path}") from None
     except (OSError, ValueError, EOFError) as e:
-        raise InputError(f"object {entry['id']!r} of {manifest_path(library)}: cannot read "
+        raise InputError(f"object {obj.id!r} of {manifest_path(library)}: cannot read "
                          f"{key} file {path} ({e})") from None
 
 
-def _save(out: Path, manifest: dict, seed: int) -> None:
+def _save(out: Path, manifest: Manifest, seed: int) -> None:
     # The split depends on how many members each family has: re-assign it over the whole manifest
     # so a manifest on disk is always split as a complete build with these objects would be.
-    assign_splits(manifest["objects"], seed)
-    manifest["split_rule"] = {"seed": seed, "unseen_families": sorted(UNSEEN_FAMILIES),
-                              "member_fraction": MEMBER_FRACTION}
-    write_json(out / "manifest.json", manifest)
+    assign_splits(manifest.objects, seed)
+    manifest.split_rule = {"seed": seed, "unseen_families": sorted(UNSEEN_FAMILIES),
+                           "member_fraction": MEMBER_FRACTION}
+    write_manifest(out, manifest)
 
 
-def _load_or_new(out: Path) -> dict:
-    new = {"objects": [], "rejected": [], "timings": {}}
-    if (out / "manifest.json").is_file():
-        return {**new, **read_manifest(out)}  # the bookkeeping keys are optional on disk
-    return new
+def _load_or_new(out: Path) -> Manifest:
+    return read_manifest(out) if (out / "manifest.json").is_file() else Manifest()
 
 
 def _no_pose_reason(fields: dict) -> str:
@@ -96,28 +90,30 @@ def _no_pose_reason(fields: dict) -> str:
     return "no stable pose found"
 
 
-def _add(out: Path, manifest: dict, entry: dict, rng, mesh, convex, cfg, cache) -> None:
+def _add(out: Path, manifest: Manifest, entry: LibraryObject, rng, mesh, convex, cfg,
+         cache) -> None:
+    """Processes `entry`'s mesh; appends the object, or its rejection, to `manifest`."""
     try:
-        fields = process_object(mesh, entry["id"], out, rng, cfg, convex, cache)
+        fields = process_object(mesh, entry.id, out, rng, cfg, convex, cache)
     except Rejected as e:
-        manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
+        manifest.rejected.append(Rejection(entry.source, str(e)))
         return
     if fields["num_stable_poses"] == 0:
-        manifest["rejected"].append({"source": entry["source"], "reason": _no_pose_reason(fields)})
+        manifest.rejected.append(Rejection(entry.source, _no_pose_reason(fields)))
         return
     # Warnings from loading the file (ingest) come first, then those from processing it.
-    warnings = entry.get("warnings", []) + fields["warnings"]
-    manifest["objects"].append({**entry, **fields, "warnings": warnings})
+    warnings = entry.warnings + fields["warnings"]
+    manifest.objects.append(dataclasses.replace(entry, **{**fields, "warnings": warnings}))
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
-                     progress: bool = True) -> dict:
+                     progress: bool = True) -> Manifest:
     from tqdm import tqdm
 
     out, cfg = Path(out), cfg or ProcessConfig()
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_or_new(out)
-    done = {o["id"] for o in manifest["objects"]} | {r["source"] for r in manifest["rejected"]}
+    done = {o.id for o in manifest.objects} | {r.source for r in manifest.rejected}
     families = sorted(FAMILIES)
     t0 = time.perf_counter()
     for i in tqdm(range(num), disable=not progress, desc="objects"):
@@ -128,21 +124,21 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
             continue
         obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
         rng = np.random.default_rng(obj_seed)
-        entry = {"id": object_id, "source": f"procedural:{family}:{obj_seed}", "family": family}
+        entry = LibraryObject(id=object_id, source=f"procedural:{family}:{obj_seed}", family=family)
         try:
             mesh = make_family_mesh(family, obj_seed)
         except ValueError as e:
-            manifest["rejected"].append({"source": entry["source"], "reason": str(e)})
+            manifest.rejected.append(Rejection(entry.source, str(e)))
             continue
         _add(out, manifest, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
         _save(out, manifest, seed)  # after every object: a killed run resumes here
-    manifest["timings"]["build_s"] = manifest["timings"].get("build_s", 0.0) + time.perf_counter() - t0
+    manifest.timings["build_s"] = manifest.timings.get("build_s", 0.0) + time.perf_counter() - t0
     _save(out, manifest, seed)
     return manifest
 
 
 def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
-                  cfg: ProcessConfig | None = None, progress: bool = True) -> dict:
+                  cfg: ProcessConfig | None = None, progress: bool = True) -> Manifest:
     from tqdm import tqdm
 
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
@@ -154,7 +150,7 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
                          f"({', '.join(sorted(SUPPORTED))}) in it")
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_or_new(out)
-    done = {o["source"] for o in manifest["objects"]} | {r["source"] for r in manifest["rejected"]}
+    done = {o.source for o in manifest.objects} | {r.source for r in manifest.rejected}
     for path in tqdm(find_mesh_files(source), disable=not progress, desc="ingest"):
         rel = str(path.relative_to(source))
         if rel in done:
@@ -164,15 +160,15 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
         try:
             mesh, warnings = load_watertight(path)
         except Rejected as e:
-            manifest["rejected"].append({"source": rel, "reason": str(e)})
+            manifest.rejected.append(Rejection(rel, str(e)))
             _save(out, manifest, seed)
             continue
         object_id = "mesh_" + "".join(c if c.isalnum() else "_" for c in Path(rel).with_suffix("").as_posix())
-        entry = {"id": object_id, "source": rel, "family": INGESTED_FAMILY, "warnings": warnings}
+        entry = LibraryObject(id=object_id, source=rel, family=INGESTED_FAMILY, warnings=warnings)
         convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
         try:
             _add(out, manifest, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
         except Exception as e:  # one bad object must not end the run
-            manifest["rejected"].append({"source": rel, "reason": f"processing failed: {e}"})
+            manifest.rejected.append(Rejection(rel, f"processing failed: {e}"))
         _save(out, manifest, seed)
     return manifest

@@ -1,5 +1,10 @@
-"""Reading an object library's manifest.json: the one reader, so every command that takes
---objects reports a missing or corrupt library the same way (an InputError naming the file).
+"""An object library's manifest.json: its typed schema, the one reader and the one writer.
+
+LIBRARY/manifest.json holds {"objects": [LibraryObject...], "rejected": [Rejection...],
+"split_rule": {...}, "timings": {...}}; every path in it is relative to LIBRARY. Every command
+that takes --objects reads it through read_manifest, so a missing or corrupt library is reported
+the same way (an InputError naming the file and, for a bad entry, the object and the field), and
+the library builder writes it through write_manifest.
 
 Kept apart from assets/library.py so readers (contact data, Ray workers) need not import the
 mesh-processing stack the library builder uses.
@@ -7,45 +12,188 @@ mesh-processing stack the library builder uses.
 
 from __future__ import annotations
 
+import dataclasses
+import types
+import typing
 from pathlib import Path
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.io_utils import read_json
+from corn_drake.io_utils import read_json, write_json
 
 WHAT = "object library manifest"
+SPLITS = ("train", "unseen")
+
+
+@dataclasses.dataclass
+class LibraryObject:
+    """One object of the library (one entry of "objects")."""
+
+    id: str
+    # "train" | "unseen", assigned over the whole library (assets/splits.py); "" only while an
+    # object is being added, never on disk.
+    split: str = ""
+    family: str = ""
+    source: str = ""  # "procedural:<family>:<seed>" or the mesh file, relative to the source folder
+    unseen_group: str | None = None  # for unseen objects: "family", "member" or "ingested"
+    # What the scene needs (paths relative to the library). A hand-written or test library may
+    # leave some out; readers name the fields they need with require().
+    radius: float | None = None
+    mass: float | None = None
+    thin: bool | None = None
+    hulls: list[str] | None = None
+    visual: str | None = None
+    cloud: str | None = None
+    stable_poses: str | None = None
+    bbox_corners: str | None = None
+    unit_inertia: str | None = None
+    # How the object was built.
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    hull_repairs: list[str] = dataclasses.field(default_factory=list)
+    num_hulls: int | None = None
+    num_stable_poses: int | None = None
+    drops: dict | None = None  # stable-pose drop statistics (assets/stable_poses.py)
+    stable_pose_kept_fraction: float | None = None
+    hull_volume_ratio: float | None = None
+    coacd_runs: int | None = None
+    timings: dict = dataclasses.field(default_factory=dict)
+    # Fields this schema does not name (written by another version): kept and written back.
+    extra: dict = dataclasses.field(default_factory=dict)
+
+    def require(self, library: str | Path, fields) -> None:
+        """An InputError naming the manifest, this object and the fields it lacks, if any."""
+        missing = [f for f in fields if getattr(self, f) is None]
+        if missing:
+            raise InputError(f"{WHAT} {manifest_path(library)}: object {self.id!r} has no "
+                             f"{', '.join(repr(k) for k in missing)}")
+
+
+@dataclasses.dataclass
+class Rejection:
+    """An input that did not become an object, and why."""
+
+    source: str
+    reason: str
+
+
+@dataclasses.dataclass
+class Manifest:
+    objects: list[LibraryObject] = dataclasses.field(default_factory=list)
+    rejected: list[Rejection] = dataclasses.field(default_factory=list)
+    split_rule: dict | None = None  # the seed and rule the splits were assigned with
+    timings: dict = dataclasses.field(default_factory=dict)
+    extra: dict = dataclasses.field(default_factory=dict)
+
+    def ids(self, split: str | None = None) -> list[str]:
+        """Object ids, in manifest order; only those of `split` when given."""
+        return [o.id for o in self.objects if split in (None, o.split)]
+
+    def get(self, library: str | Path, object_id: str) -> LibraryObject:
+        for o in self.objects:
+            if o.id == object_id:
+                return o
+        raise InputError(f"object {object_id!r} not in library {library}")
 
 
 def manifest_path(library: str | Path) -> Path:
     return Path(library) / "manifest.json"
 
 
-def read_manifest(library: str | Path) -> dict:
-    """The validated manifest of `library`: a dict whose "objects" is a list of entries, each
-    with a unique string "id" and a string "split"; other fields are checked where used."""
+# --- typed (de)serialisation ----------------------------------------------------------------
+def _matches(value, hint) -> bool:
+    """Whether a JSON value fits a field's type (the schema's few kinds: str, int, float, bool,
+    list[str], dict, and their `| None`)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_matches(value, a) for a in args)
+    if hint is type(None):
+        return value is None
+    if origin is list:
+        return isinstance(value, list) and all(_matches(v, args[0]) for v in value)
+    if hint is dict or origin is dict:
+        return isinstance(value, dict)
+    if hint is float:  # JSON writes 1.0 as 1
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, hint)
+
+
+def _from_json(cls, data, where: str, path: Path):
+    """`cls` from a JSON object; a non-object, a missing required field or a value of the
+    wrong type raises an InputError naming `where` and the field."""
+    if not isinstance(data, dict):
+        raise InputError(f"{WHAT} {path}: {where} is not an object")
+    hints = typing.get_type_hints(cls)
+    named = {f.name for f in dataclasses.fields(cls) if f.name != "extra"}
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in named or f.name not in data:
+            continue
+        if not _matches(data[f.name], hints[f.name]):
+            raise InputError(f"{WHAT} {path}: {where} field {f.name!r} must be "
+                             f"{_type_name(hints[f.name])}, got {data[f.name]!r}")
+        values[f.name] = data[f.name]
+    required = [f.name for f in dataclasses.fields(cls)
+                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    for name in required:
+        if name not in values:
+            raise InputError(f"{WHAT} {path}: {where} has no {name!r}")
+    extra = {k: v for k, v in data.items() if k not in named}
+    if "extra" in hints:
+        values["extra"] = extra
+    return cls(**values)
+
+
+def _type_name(hint) -> str:
+    return getattr(hint, "__name__", None) or str(hint).replace("typing.", "")
+
+
+def _to_json(record) -> dict:
+    data = {f.name: getattr(record, f.name) for f in dataclasses.fields(record) if f.name != "extra"}
+    return {**data, **getattr(record, "extra", {})}
+
+
+def manifest_to_json(manifest: Manifest) -> dict:
+    data = {"objects": [_to_json(o) for o in manifest.objects],
+            "rejected": [_to_json(r) for r in manifest.rejected], "timings": manifest.timings}
+    if manifest.split_rule is not None:
+        data["split_rule"] = manifest.split_rule
+    return {**data, **manifest.extra}
+
+
+def read_manifest(library: str | Path) -> Manifest:
+    """The validated manifest of `library`: objects with unique non-empty ids and a split in
+    SPLITS, every named field of its type."""
     path = manifest_path(library)
     if not path.is_file():
         raise MissingInputError(f"object library {library}: no manifest.json")
-    manifest = read_json(path, WHAT)
-    if not isinstance(manifest, dict) or not isinstance(manifest.get("objects"), list):
+    data = read_json(path, WHAT)
+    if not isinstance(data, dict) or not isinstance(data.get("objects"), list):
         raise InputError(f"{WHAT} {path}: expected an object with an 'objects' list")
-    if not isinstance(manifest.get("rejected", []), list):
+    if not isinstance(data.get("rejected", []), list):
         raise InputError(f"{WHAT} {path}: 'rejected' must be a list")
+    objects = []
+    for index, entry in enumerate(data["objects"]):
+        where = f"objects[{index}]"
+        if not isinstance(entry, dict) or not isinstance(entry.get("id"), str) or not entry["id"]:
+            raise InputError(f"{WHAT} {path}: {where} has no 'id' string")
+        obj = _from_json(LibraryObject, entry, f"{where} ({entry['id']!r})", path)
+        if obj.split not in SPLITS:
+            raise InputError(f"{WHAT} {path}: {where} ({obj.id!r}) has split {obj.split!r}, "
+                             f"expected one of {SPLITS}")
+        objects.append(obj)
     seen = set()
-    for index, entry in enumerate(manifest["objects"]):
-        if not isinstance(entry, dict):
-            raise InputError(f"{WHAT} {path}: objects[{index}] is not an object")
-        for key in ("id", "split"):
-            if not isinstance(entry.get(key), str) or not entry[key]:
-                raise InputError(f"{WHAT} {path}: objects[{index}] has no '{key}' string")
-        if entry["id"] in seen:
-            raise InputError(f"{WHAT} {path}: object id {entry['id']!r} appears twice")
-        seen.add(entry["id"])
-    return manifest
+    for obj in objects:
+        if obj.id in seen:
+            raise InputError(f"{WHAT} {path}: object id {obj.id!r} appears twice")
+        seen.add(obj.id)
+    rejected = [_from_json(Rejection, r, f"rejected[{i}]", path)
+                for i, r in enumerate(data.get("rejected", []))]
+    rest = _from_json(Manifest, {k: v for k, v in data.items() if k not in ("objects", "rejected")},
+                      "the manifest", path)
+    return dataclasses.replace(rest, objects=objects, rejected=rejected)
 
 
-def require_fields(library: str | Path, entry: dict, keys) -> None:
-    """An InputError naming the manifest, the object and the fields it lacks, if any."""
-    missing = [k for k in keys if k not in entry]
-    if missing:
-        raise InputError(f"{WHAT} {manifest_path(library)}: object {entry['id']!r} has no "
-                         f"{', '.join(repr(k) for k in missing)}")
+def write_manifest(library: str | Path, manifest: Manifest) -> None:
+    """Writes LIBRARY/manifest.json atomically."""
+    write_json(manifest_path(library), manifest_to_json(manifest))

@@ -19,6 +19,7 @@ import zlib
 from collections import defaultdict
 
 from corn_drake.assets.families import UNSEEN_FAMILIES
+from corn_drake.assets.manifest import LibraryObject
 from corn_drake.errors import InputError
 
 INGESTED_FAMILY = "ingested"
@@ -42,24 +43,23 @@ def _rank_key(seed: int, object_id: str) -> tuple[int, str]:
     return zlib.crc32(f"{seed}:split:{object_id}".encode()), object_id
 
 
-def assign_splits(objects: list[dict], seed: int, fraction: float = MEMBER_FRACTION) -> None:
+def assign_splits(objects: list[LibraryObject], seed: int, fraction: float = MEMBER_FRACTION) -> None:
     """Sets `split` ("train" | "unseen") and `unseen_group` (a GROUPS entry, None for train) on
-    each manifest entry in place; entries need `id` and `family`."""
-    by_family: dict[str, list[dict]] = defaultdict(list)
+    each library object in place; objects need an `id` and a `family`."""
+    by_family: dict[str, list[LibraryObject]] = defaultdict(list)
     for o in objects:
-        for key in ("id", "family"):
-            if key not in o:
-                raise InputError(f"manifest entry {o.get('id', o)!r} has no {key!r}")
-        by_family[o["family"]].append(o)
+        if not o.family:
+            raise InputError(f"manifest entry {o.id!r} has no 'family'")
+        by_family[o.family].append(o)
     for family, members in by_family.items():
         if family in UNSEEN_FAMILIES:
             unseen, group = members, "family"
         else:
-            ranked = sorted(members, key=lambda o: _rank_key(seed, o["id"]))
+            ranked = sorted(members, key=lambda o: _rank_key(seed, o.id))
             unseen = ranked[:held_out_count(len(members), fraction)]
             group = INGESTED_FAMILY if family == INGESTED_FAMILY else "member"
-        unseen_ids = {o["id"] for o in unseen}
+        unseen_ids = {o.id for o in unseen}
         for o in members:
-            held = o["id"] in unseen_ids
-            o["split"] = "unseen" if held else "train"
-            o["unseen_group"] = group if held else None
+            held = o.id in unseen_ids
+            o.split = "unseen" if held else "train"
+            o.unseen_group = group if held else None

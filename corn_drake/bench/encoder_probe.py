@@ -22,13 +22,15 @@ def _rss_mb() -> float:
 
 
 def main(kind: str, batch: int) -> dict:
+    from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM
     from corn_drake.nn.encoder import CORNEncoder
     from corn_drake.nn.patchify import patch_indices
     from corn_drake.nn.pointnet import PointNetEncoder
 
     torch.manual_seed(0)
     model = (CORNEncoder() if kind == "corn" else PointNetEncoder(chunk=CHUNK)).eval()
-    points, hand = torch.randn(batch, 512, 3) * 0.3, torch.randn(batch, 9)
+    points = torch.randn(batch, DEFAULT_NUM_POINTS, 3) * 0.3
+    hand = torch.randn(batch, HAND_STATE_DIM)
 
     def forward():
         if kind == "corn":

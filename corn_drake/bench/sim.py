@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.contract import ACTION_DIM
 from corn_drake.errors import InputError
 
 NAME = "sim"
@@ -48,7 +49,7 @@ def _episodes(env, steps: int, seed: int):
     plans, left = [], steps
     while left > 0:
         n = min(left, env.cfg.task.episode_steps)
-        plans.append((int(rng.integers(1 << 31)), rng.uniform(-1, 1, (n, 20))))
+        plans.append((int(rng.integers(1 << 31)), rng.uniform(-1, 1, (n, ACTION_DIM))))
         left -= n
     return plans
 

@@ -104,9 +104,9 @@ def run(args) -> int:
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         policy = base.policy
         if args.stochastic:
-            import torch
+            from corn_drake.systems.policy import SampledActions
 
-            agent.action_noise = torch.Generator().manual_seed(args.seed)
+            agent = SampledActions(agent)  # the diagram samples: RandomSource seeded per episode
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     print(f"evaluate {args.run} on task {cfg.task.name}"

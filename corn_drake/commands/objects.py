@@ -7,7 +7,12 @@ before the record was kept are not checked); a procedural --num may grow, adding
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from corn_drake.cli_types import nonnegative_int, positive_int
+
+if TYPE_CHECKING:
+    from corn_drake.assets.manifest import LibraryObject
 
 NAME = "objects"
 HELP = "build an object library: --source procedural, or --source PATH (OBJ/STL/PLY/GLB/OFF)"
@@ -37,31 +42,32 @@ def output_arguments(args) -> dict:
     return recorded
 
 
-def _split_summary(objects: list[dict]) -> str:
-    """'N train + M unseen objects (k family, l member)': the unseen count by kind of novelty."""
+def _split_summary(objects: list[LibraryObject]) -> str:
+    """'N train + M unseen objects (k family, l member)' : the unseen count by kind of novelty."""
     from collections import Counter
 
-    splits = Counter(o["split"] for o in objects)
-    groups = Counter(o.get("unseen_group") for o in objects if o["split"] == "unseen")
+    splits = Counter(o.split for o in objects)
+    groups = Counter(o.unseen_group for o in objects if o.split == "unseen")
     kinds = ", ".join(f"{n} {g}" for g, n in sorted(groups.items(), key=lambda kv: str(kv[0])))
     return (f"{splits['train']} train + {splits['unseen']} unseen objects"
             + (f" ({kinds})" if kinds else ""))
 
 
-def _stable_pose_summary(objects: list[dict]) -> list[str]:
-    """Stable poses kept under both contact settings, overall and for each object that lost some."""
-    checked = [o for o in objects if "stable_pose_kept_fraction" in o]
-    held = sum(o["drops"]["verified"] for o in checked)
-    kept = sum(o["drops"]["held_second_setting"] for o in checked)
+def _stable_pose_summary(objects: list[LibraryObject]) -> list[str]:
+    """Stable poses kept under both contact settings, overall and for each object that lost
+    some."""
+    checked = [o for o in objects if o.stable_pose_kept_fraction is not None]
+    held = sum(o.drops["verified"] for o in checked)
+    kept = sum(o.drops["held_second_setting"] for o in checked)
     lines = [f"stable poses holding under both contact settings: {kept} of the {held} holding in "
              f"the training setting ({kept / max(held, 1):.0%})"]
     if len(checked) < len(objects):  # a library resumed from a build before the second setting
         lines[0] += f"; {len(objects) - len(checked)} older objects were not checked"
     for o in checked:
-        if o["stable_pose_kept_fraction"] < 1.0:
-            d = o["drops"]
-            lines.append(f"  {o['id']}: kept {d['held_second_setting']} of {d['verified']} "
-                         f"({o['stable_pose_kept_fraction']:.0%})")
+        if o.stable_pose_kept_fraction < 1.0:
+            d = o.drops
+            lines.append(f"  {o.id}: kept {d['held_second_setting']} of {d['verified']} "
+                         f"({o.stable_pose_kept_fraction:.0%})")
     return lines
 
 
@@ -78,9 +84,9 @@ def run(args) -> int:
             manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
         else:
             manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
-    print(_split_summary(manifest["objects"]) + f", {len(manifest['rejected'])} rejected; "
+    print(_split_summary(manifest.objects) + f", {len(manifest.rejected)} rejected; "
           f"manifest {args.out}/manifest.json")
-    print("\n".join(_stable_pose_summary(manifest["objects"])))
-    for r in manifest["rejected"]:
-        print(f"  rejected {r['source']}: {r['reason']}")
+    print("\n".join(_stable_pose_summary(manifest.objects)))
+    for r in manifest.rejected:
+        print(f"  rejected {r.source}: {r.reason}")
     return 0

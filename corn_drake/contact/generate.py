@@ -22,6 +22,7 @@ import torch
 
 from corn_drake.contact.gripper_sdf import GripperSDF
 from corn_drake.contact.library_clouds import ObjectCloud
+from corn_drake.transforms import quat_wxyz_to_matrix
 
 SPLIT_CODES = {"train": 0, "val": 1, "unseen": 2}
 
@@ -40,16 +41,7 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
     """Uniform rotations (n, 3, 3) from normalised Gaussian quaternions; also returns wxyz."""
     q = rng.normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return _quat_to_matrix(q), q
-
-
-def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], axis=1)
+    return quat_wxyz_to_matrix(q), q
 
 
 def shard_rng(seed: int, split: str, shard: int) -> np.random.Generator:

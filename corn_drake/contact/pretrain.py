@@ -24,14 +24,13 @@ from corn_drake.contact.shards import load_split
 from corn_drake.errors import InputError
 from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.encoder import CORNContactModel
-from corn_drake.nn.encoder_io import save_encoder
+from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_POSITION, POSE7_QUATERNION
+from corn_drake.nn.encoder_io import NormalizedEncoder, save_encoder
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
+from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics
 from corn_drake.nn.patchify import gather_points, patch_indices
 from corn_drake.nn.pointnet import PointNetContactModel
-
-CENTER = torch.tensor([0.0, 0.0, 0.55])
-SCALE = 0.4
 
 
 def _global_rng_state() -> dict:
@@ -52,32 +51,35 @@ def _set_global_rng_state(state: dict) -> None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 
-def hand9(hand_pose: torch.Tensor) -> torch.Tensor:
+def hand9(hand_pose: torch.Tensor, normalization: InputNormalization) -> torch.Tensor:
     """Tool pose (B, 7: xyz + wxyz) -> normalised position + 6D rotation (B, 9)."""
-    return torch.cat([(hand_pose[:, :3] - CENTER) / SCALE, rot6d(quat_wxyz_to_matrix(hand_pose[:, 3:]))], -1)
+    p, q = hand_pose[:, POSE7_POSITION], hand_pose[:, POSE7_QUATERNION]
+    return normalization.hand(torch.cat([p, rot6d(quat_wxyz_to_matrix(q))], -1))
 
 
-def augment(points, hand_pose, cfg: PretrainConfig, g: torch.Generator):
+def augment(points, hand_pose, cfg: PretrainConfig, g: torch.Generator,
+            normalization: InputNormalization):
     """Random yaw about the cloud centroid and a translation, applied to cloud and gripper alike,
-    then point noise on the cloud."""
+    then point noise on the cloud; returns the normalised (points, 9-D hand)."""
     B = points.shape[0]
     center = points.mean(1, keepdim=True)
     R = yaw_matrix(torch.rand(B, generator=g) * 2 * math.pi)
     shift = torch.randn(B, 1, 3, generator=g) * cfg.translate_std
     points = (points - center) @ R.transpose(1, 2) + center + shift
-    hand_R = R @ quat_wxyz_to_matrix(hand_pose[:, 3:])
-    hand_p = ((hand_pose[:, None, :3] - center) @ R.transpose(1, 2) + center + shift)[:, 0]
+    hand_R = R @ quat_wxyz_to_matrix(hand_pose[:, POSE7_QUATERNION])
+    hand_p = ((hand_pose[:, None, POSE7_POSITION] - center) @ R.transpose(1, 2) + center + shift)[:, 0]
     points = points + torch.randn(points.shape, generator=g) * cfg.point_noise_std
-    hand = torch.cat([(hand_p - CENTER) / SCALE, rot6d(hand_R)], -1)
-    return (points - CENTER) / SCALE, hand
+    return normalization.points(points), normalization.hand(torch.cat([hand_p, rot6d(hand_R)], -1))
 
 
-def prepare(points, hand_pose, cfg, g=None):
-    """Normalised (points, 9-D hand) for the encoder; augmented when a generator is given."""
+def prepare(points, hand_pose, cfg, g=None, normalization: InputNormalization | None = None):
+    """Normalised (points, 9-D hand) for the encoder; augmented when a generator is given.
+    `normalization`: what the encoder is pretrained with (default: the contract's values)."""
+    normalization = normalization or InputNormalization()
     points, hand_pose = points.float(), hand_pose.float()
     if g is not None:
-        return augment(points, hand_pose, cfg, g)
-    return (points - CENTER) / SCALE, hand9(hand_pose)
+        return augment(points, hand_pose, cfg, g, normalization)
+    return normalization.points(points), hand9(hand_pose, normalization)
 
 
 def patch_labels(labels: torch.Tensor, knn_idx: torch.Tensor) -> torch.Tensor:
@@ -92,6 +94,8 @@ class Pretrainer:
         self.cfg, self.out, self.data = cfg, Path(out), Path(data)
         torch.manual_seed(cfg.seed)
         self.model = CORNContactModel() if cfg.model == "corn" else PointNetContactModel()
+        # Exported with the encoder: policies normalise their inputs the same way.
+        self.normalization = InputNormalization()
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr,
                                            weight_decay=cfg.weight_decay)
         self.generator = torch.Generator().manual_seed(cfg.seed)
@@ -155,7 +159,8 @@ class Pretrainer:
         logits, targets = [], []
         for i in range(0, n, 512):
             sl = slice(i, min(i + 512, n))
-            pts, hand = prepare(torch.from_numpy(data["points"][sl]), torch.from_numpy(data["hand_pose"][sl]), self.cfg)
+            pts, hand = prepare(torch.from_numpy(data["points"][sl]), torch.from_numpy(data["hand_pose"][sl]),
+                                self.cfg, normalization=self.normalization)
             lg, tg, _ = self._forward(pts, hand, torch.from_numpy(data["labels"][sl]))
             logits.append(lg)
             targets.append(tg)
@@ -175,7 +180,7 @@ class Pretrainer:
             t_step = time.perf_counter()
             idx = torch.randint(n, (cfg.batch_size,), generator=self.generator)
             pts, hand = prepare(self.train_set["points"][idx], self.train_set["hand_pose"][idx], cfg,
-                                self.generator)
+                                self.generator, self.normalization)
             _, _, loss = self._forward(pts, hand, self.train_set["labels"][idx])
             if self.initial_loss is None:
                 self.initial_loss = loss.item()
@@ -212,8 +217,9 @@ class Pretrainer:
             for k, v in self.evaluate(split).items():
                 metrics[f"{prefix}_patch_{k}"] = v
         write_json(self.out / "metrics.json", metrics)
-        encoder = self.model.encoder
-        save_encoder(self.out / "encoder.pt", cfg.model, encoder, pretraining=metrics)
+        save_encoder(self.out / "encoder.pt",
+                     NormalizedEncoder(cfg.model, self.model.encoder, self.normalization),
+                     pretraining=metrics)
         plot_predictions(self, self.out / "plots" / "predictions.png")
         return metrics
 
@@ -224,8 +230,8 @@ def seconds_per_step(model_kind: str, batch_size: int, repeats: int = 3) -> floa
     torch.manual_seed(0)
     model = CORNContactModel() if model_kind == "corn" else PointNetContactModel()
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
-    points = torch.randn(batch_size, 512, 3) * 0.2
-    hand = torch.randn(batch_size, 9)
+    points = torch.randn(batch_size, DEFAULT_NUM_POINTS, 3) * 0.2
+    hand = torch.randn(batch_size, HAND_STATE_DIM)
     times = []
     for _ in range(repeats + 1):
         t = time.perf_counter()
@@ -245,7 +251,6 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from corn_drake.contact.generate import _quat_to_matrix
     from corn_drake.scene.gripper import gripper_boxes
 
     try:
@@ -259,7 +264,8 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
     with torch.no_grad():
         for col, i in enumerate(picks):
             pts_w = torch.from_numpy(data["points"][i:i + 1])
-            pts, hand = prepare(pts_w, torch.from_numpy(data["hand_pose"][i:i + 1]), trainer.cfg)
+            pts, hand = prepare(pts_w, torch.from_numpy(data["hand_pose"][i:i + 1]), trainer.cfg,
+                                normalization=trainer.normalization)
             logits, targets, _ = trainer._forward(pts, hand, torch.from_numpy(labels[i:i + 1]))
             _, knn = patch_indices(pts)
             point_patch = torch.zeros(512, dtype=torch.long)
@@ -269,7 +275,7 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
                 colors = np.where(values[point_patch].numpy(), "tab:red", "tab:blue")
                 p = data["points"][i]
                 ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=colors, s=3)
-                R = _quat_to_matrix(data["hand_pose"][i:i + 1, 3:])[0]
+                R = quat_wxyz_to_matrix(torch.from_numpy(data["hand_pose"][i, 3:])).numpy()
                 for box in gripper_boxes():
                     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
                     c = (box.X_TB[:3, :3] @ (corners * box.half_extents).T).T + box.X_TB[:3, 3]

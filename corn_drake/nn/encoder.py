@@ -5,13 +5,16 @@ Tokenizer: the flattened patch (96) through Linear-LN-GELU 256, Linear-LN-GELU 2
 Position: cat(centre (3), MLP 3 -> 128 -> 125 (GELU)) added to each patch token.
 Hand token: Linear(9 -> 128) on tool position + 6D rotation, placed first.
 Transformer: 2 pre-LN layers, width 128, 4 heads, feed-forward 128 (GELU), then a final LN.
-Inputs are already normalised ((x - (0, 0, 0.55)) / 0.4 for points and the hand position).
+Inputs are normalised points and hand position (nn/input_normalization.py; NormalizedEncoder in
+nn/encoder_io.py applies the normalisation the encoder was pretrained with).
 """
 
 from __future__ import annotations
 
 import torch
 from torch import nn
+
+from corn_drake.contract import HAND_STATE_DIM
 
 from corn_drake.nn.patchify import group, patch_indices
 
@@ -40,7 +43,7 @@ class EncoderLayer(nn.Module):
 
 class CORNEncoder(nn.Module):
     def __init__(self, num_patches: int = 16, patch_size: int = 32, dim: int = 128,
-                 layers: int = 2, heads: int = 4, ffn: int = 128, hand_dim: int = 9,
+                 layers: int = 2, heads: int = 4, ffn: int = 128, hand_dim: int = HAND_STATE_DIM,
                  dropout: float = 0.0):
         super().__init__()
         self.num_patches, self.patch_size, self.dim = num_patches, patch_size, dim

@@ -1,4 +1,12 @@
-"""Saving and loading pretrained encoders (frozen export the policies load)."""
+"""Encoders with their input normalisation, and saving / loading them (encoder.pt).
+
+A network is only meaningful on inputs normalised as it was trained, so policies never see a
+bare network: NormalizedEncoder holds the network and its InputNormalization, takes world-frame
+clouds and hand states, and is what make_policy_encoder and load_frozen_encoder return.
+
+encoder.pt: {"kind", "state_dict" (the network's), "normalization" (InputNormalization.record()),
+"pretraining" (how it was made)}.
+"""
 
 from __future__ import annotations
 
@@ -10,10 +18,13 @@ from torch import nn
 
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.io_utils import atomic_path
+from corn_drake.nn.input_normalization import InputNormalization
+
+ENCODER_KINDS = ("corn", "pointnet")
 
 
 def make_encoder(kind: str) -> nn.Module:
-    """A freshly initialised encoder of `kind` ("corn" or "pointnet")."""
+    """A freshly initialised network of `kind` ("corn" or "pointnet"), without normalisation."""
     from corn_drake.nn.encoder import CORNEncoder
     from corn_drake.nn.pointnet import PointNetEncoder
 
@@ -21,33 +32,64 @@ def make_encoder(kind: str) -> nn.Module:
         return CORNEncoder()
     if kind == "pointnet":
         return PointNetEncoder()
-    raise ValueError(f"unknown encoder kind {kind!r}")
+    raise ValueError(f"unknown encoder kind {kind!r}; expected one of {ENCODER_KINDS}")
 
 
-def save_encoder(path: str | Path, kind: str, encoder: nn.Module,
-                 pretraining: dict | None = None) -> None:
-    """`pretraining` records how the encoder was made (steps, budget, held-out/unseen patch
-    metrics): policies check it, so an encoder that never learned contact is not used unawares."""
+class NormalizedEncoder(nn.Module):
+    """(world-frame cloud (B, N, 3), hand state (B, 9)) -> the network's output on normalised
+    inputs: tokens (B, 1 + G, D) for "corn", a global feature (B, F) for "pointnet"."""
+
+    def __init__(self, kind: str, network: nn.Module, normalization: InputNormalization,
+                 pretraining: dict | None = None):
+        super().__init__()
+        self.kind, self.network, self.normalization = kind, network, normalization
+        # How the network was pretrained (steps, held-out / unseen patch metrics): policies
+        # check it, so an encoder that never learned contact is not used unawares. None for a
+        # fresh network or an encoder exported before the record existed.
+        self.pretraining = pretraining
+
+    def forward(self, cloud: torch.Tensor, hand: torch.Tensor, *args, **kwargs) -> torch.Tensor:
+        # Extra arguments (e.g. the CORN encoder's precomputed patch indices) pass through:
+        # FPS and kNN are unchanged by a translation and a uniform scale.
+        return self.network(self.normalization.points(cloud), self.normalization.hand(hand),
+                            *args, **kwargs)
+
+
+def make_policy_encoder(kind: str) -> NormalizedEncoder:
+    """A fresh network of `kind` with the default normalisation (trained end to end by PPO)."""
+    return NormalizedEncoder(kind, make_encoder(kind), InputNormalization())
+
+
+def save_encoder(path: str | Path, encoder: NormalizedEncoder, pretraining: dict | None = None) -> None:
+    """Writes `encoder` (network, normalisation) atomically; `pretraining` records how it was
+    made (steps, budget, held-out/unseen patch metrics)."""
     with atomic_path(path) as tmp:
-        torch.save({"kind": kind, "state_dict": encoder.state_dict(),
+        torch.save({"kind": encoder.kind, "state_dict": encoder.network.state_dict(),
+                    "normalization": encoder.normalization.record(),
                     "pretraining": pretraining}, tmp)
 
 
-def load_frozen_encoder(path: str | Path) -> nn.Module:
-    """The encoder saved at `path`, in eval mode with gradients off."""
+def load_frozen_encoder(path: str | Path) -> NormalizedEncoder:
+    """The encoder saved at `path` with the normalisation it was pretrained with, in eval mode
+    with gradients off."""
     path = Path(path)
     if not path.is_file():
         raise MissingInputError(f"encoder checkpoint not found: {path}")
     try:
         state = torch.load(path, weights_only=False)
-        encoder = make_encoder(state["kind"])
-        encoder.load_state_dict(state["state_dict"])
+        network = make_encoder(state["kind"])
+        network.load_state_dict(state["state_dict"])
+        # encoder.pt files written before the normalisation was saved hold none: every one of
+        # them was pretrained with the contract's ENCODER_INPUT_CENTER / ENCODER_INPUT_SCALE,
+        # the only values ever used, which InputNormalization() holds.
+        record = state.get("normalization")
+        normalization = InputNormalization() if record is None else InputNormalization.from_record(record)
     # Garbage bytes fail in the unpickler, a truncated file in torch's zip reader, a checkpoint
-    # of something else on its keys or its kind.
-    except (KeyError, TypeError, ValueError, RuntimeError, EOFError, pickle.UnpicklingError) as e:
+    # of something else on its keys, its kind or its normalisation record.
+    except (KeyError, TypeError, ValueError, RuntimeError, EOFError, AttributeError,
+            pickle.UnpicklingError) as e:
         raise InputError(f"encoder checkpoint {path} is not a saved encoder ({e})") from e
-    # None for encoders exported before the record existed.
-    encoder.pretraining = state.get("pretraining")
+    encoder = NormalizedEncoder(state["kind"], network, normalization, state.get("pretraining"))
     encoder.eval()
     for p in encoder.parameters():
         p.requires_grad_(False)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import torch
 
+from corn_drake.transforms import quat_matrix_entries
+
 
 def quat_wxyz_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4), w first; normalised first.
+    The formula is transforms.quat_matrix_entries, shared with the numpy version."""
     q = q / q.norm(dim=-1, keepdim=True)
-    w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
-        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1).reshape(*q.shape[:-1], 3, 3)
+    return torch.stack(quat_matrix_entries(*q.unbind(-1)), -1).reshape(*q.shape[:-1], 3, 3)
 
 
 def rot6d(R: torch.Tensor) -> torch.Tensor:

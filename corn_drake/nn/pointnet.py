@@ -11,9 +11,11 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from corn_drake.contract import HAND_STATE_DIM
+
 
 class PointNetEncoder(nn.Module):
-    def __init__(self, hand_dim: int = 9, widths=(64, 128, 1024), chunk: int = 256):
+    def __init__(self, hand_dim: int = HAND_STATE_DIM, widths=(64, 128, 1024), chunk: int = 256):
         super().__init__()
         sizes = [3 + hand_dim, *widths]
         self.layers = nn.ModuleList(

@@ -1,7 +1,8 @@
 """Teacher policy heads (pure torch): cross-attention over encoder tokens, and the baselines.
 
 CrossAttentionActorCritic (the paper's `corn` / `e2e` head): 16 query tokens from
-Linear(48 -> 16 x 128) on the context (goal 9, previous action 20, joints 14, physics 5) attend
+Linear(48 -> 16 x 128) on the context (contract.CONTEXT_KEYS: goal 9, previous action 20,
+joints 14, physics 5; sizes from contract.py) attend
 (single head) over the encoder's 17 x 128 tokens; the 2048 attended features plus the context
 go through MLP 2096 -> 512 -> 256 -> 128 (LayerNorm + ELU), then an actor 128 -> 64 -> 20 with a
 learned state-independent log-std (init 0) and a critic 128 -> 64 -> 1.
@@ -14,8 +15,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-CONTEXT_DIM = 9 + 20 + 14 + 5
-ACTION_DIM = 20
+from corn_drake.contract import ACTION_DIM, CONTEXT_DIM
+
 
 
 def mlp(sizes: list[int], final_activation: bool = True) -> nn.Sequential:

@@ -20,6 +20,6 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder))
-    agent.load_state_dict(state["agent"])
+    agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
     return cfg, agent

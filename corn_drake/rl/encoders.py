@@ -1,13 +1,14 @@
 """Which encoder each policy variant gets: corn — the frozen pretrained patch encoder; pn — the
-frozen pretrained PointNet; e2e — a fresh patch encoder trained by PPO; state — none."""
+frozen pretrained PointNet; e2e — a fresh patch encoder trained by PPO; state — none.
+Each is a NormalizedEncoder: the network with the input normalisation it was (or is) trained
+with, so a policy normalises its inputs as its encoder expects."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import load_frozen_encoder
-from corn_drake.nn.encoder_io import make_encoder as make_fresh_encoder
+from corn_drake.nn.encoder_io import NormalizedEncoder, load_frozen_encoder, make_policy_encoder
 
 ENCODER_KIND = {"corn": "corn", "e2e": "corn", "pn": "pointnet"}
 
@@ -46,22 +47,23 @@ def check_pretrained(encoder, checkpoint, allow_weak: bool) -> None:
           file=sys.stderr)
 
 
-def load_encoder(policy: str, checkpoint: str | Path | None, allow_weak: bool = False):
+def load_encoder(policy: str, checkpoint: str | Path | None,
+                 allow_weak: bool = False) -> NormalizedEncoder | None:
     if policy == "state":
         return None
     if policy == "e2e":
-        return make_fresh_encoder("corn")
+        return make_policy_encoder("corn")
     if not checkpoint:
         raise InputError(f"policy {policy!r} needs --encoder CHECKPOINT (a pretrained encoder)")
     encoder = load_frozen_encoder(checkpoint)
     expected = ENCODER_KIND[policy]
-    actual = "corn" if hasattr(encoder, "tokenizer") else "pointnet"
-    if actual != expected:
-        raise InputError(f"policy {policy!r} needs a {expected} encoder, {checkpoint} holds a {actual} one")
+    if encoder.kind != expected:
+        raise InputError(f"policy {policy!r} needs a {expected} encoder, {checkpoint} holds a "
+                         f"{encoder.kind} one")
     check_pretrained(encoder, checkpoint, allow_weak)
     return encoder
 
 
-def make_encoder(policy: str):
+def make_encoder(policy: str) -> NormalizedEncoder | None:
     """A randomly initialised encoder of the kind `policy` uses (for e2e and for benchmarks)."""
-    return None if policy == "state" else make_fresh_encoder(ENCODER_KIND[policy])
+    return None if policy == "state" else make_policy_encoder(ENCODER_KIND[policy])

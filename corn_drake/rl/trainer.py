@@ -92,7 +92,7 @@ class Trainer:
         if state["policy"] != self.cfg.policy:
             raise InputError(f"{self.checkpoint_path} holds a {state['policy']!r} policy, "
                              f"not {self.cfg.policy!r}")
-        self.agent.load_state_dict(state["agent"])
+        self.agent.load_saved_state(state["agent"], self.checkpoint_path)
         self.ppo.load_state_dict(state["ppo"])
         self.reward_scaler.load_state_dict(state["reward_scaler"])
         self.global_step, self.update_index = state["global_step"], state["update_index"]

@@ -8,14 +8,14 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
+from corn_drake.contract import NUM_JOINTS
 from corn_drake.scene.gripper import PANDA_URDF, TOOL_FRAME
 
-JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, 8))
+JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, NUM_JOINTS + 1))
 EFFORT_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
 JOINT_LOWER = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
 JOINT_UPPER = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 FINGER_BODIES = ("panda_leftfinger", "panda_rightfinger")
-NUM_JOINTS = 7
 
 
 def add_franka(plant: MultibodyPlant, X_WBase: RigidTransform,

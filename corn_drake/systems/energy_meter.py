@@ -17,20 +17,23 @@ from pydrake.symbolic import MakeVectorVariable, Variable, abs as sym_abs
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import Multiplexer, SymbolicVectorSystem
 
-from corn_drake.scene.franka import NUM_JOINTS
+from corn_drake.contract import NUM_JOINTS, ROBOT_STATE_DIM
 
 
 def add_energy_meter(builder: DiagramBuilder, actuation: OutputPort, robot_state: OutputPort,
                      time_step: float, name: str = "energy_meter"):
     """Returns (energy output port (1), the meter system whose state is the energy)."""
     n = NUM_JOINTS
-    mux = builder.AddNamedSystem(f"{name}.inputs", Multiplexer([n, 2 * n]))
+    # The Multiplexer's inputs are positional: [tau (n), robot_state = (q (n), qdot (n))].
+    inputs = (actuation, robot_state)
+    mux = builder.AddNamedSystem(f"{name}.inputs", Multiplexer([n, ROBOT_STATE_DIM]))
     e = Variable("energy")
-    u = MakeVectorVariable(3 * n, "u")  # [tau (n), q (n), qdot (n)]
-    power = sum(sym_abs(u[j] * u[2 * n + j]) for j in range(n))
+    u = MakeVectorVariable(n + ROBOT_STATE_DIM, "u")
+    tau, qdot = u[:n], u[2 * n:]
+    power = sum(sym_abs(tau[j] * qdot[j]) for j in range(n))
     meter = builder.AddNamedSystem(name, SymbolicVectorSystem(
         state=[e], input=u, dynamics=[e + power], output=[e], time_period=time_step))
-    builder.Connect(actuation, mux.get_input_port(0))
-    builder.Connect(robot_state, mux.get_input_port(1))
+    for i, port in enumerate(inputs):
+        builder.Connect(port, mux.get_input_port(i))
     builder.Connect(mux.get_output_port(), meter.get_input_port())
     return meter.get_output_port(), meter

@@ -1,7 +1,7 @@
-"""ActionToJointTargets: once per policy step, turns the 20-D action into joint targets and gains.
+"""ActionToJointTargets: once per policy step, turns the action into joint targets and gains.
 
-Action (normalised to [-1, 1]): EE residual dx (3, world frame), axis-angle dr (3, world frame),
-kp (7) and damping ratio rho (7). The target EE position is clamped to +- ee_clamp around the
+Action (normalised to [-1, 1], layout contract.ACTION_SLICES): EE residual dx (3, world frame),
+axis-angle dr (3, world frame), kp (7) and damping ratio rho (7). The target EE position is clamped to +- ee_clamp around the
 current EE and to the object's box +- (radius + object_margin); damped least squares gives
 dq = J^T (J J^T + lambda I)^-1 e and q_target = q + dq.
 
@@ -17,7 +17,8 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from corn_drake.config import ControllerConfig
-from corn_drake.contract import ACTION_DIM, check_action  # noqa: F401 (check_action re-exported)
+from corn_drake.contract import (ACTION_DIM, ACTION_SLICES, FREE_BODY_POSITION,
+                                 FREE_BODY_STATE_DIM, ROBOT_STATE_DIM, check_action)
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame
 from corn_drake.timing import PolicyClock
 
@@ -26,10 +27,12 @@ class ActionScaling:
     """Normalised action in [-1, 1] <-> physical action (dx, dr, kp, rho)."""
 
     def __init__(self, cfg: ControllerConfig):
-        lo = np.concatenate([[-cfg.max_position_delta] * 3, [-cfg.max_rotation_delta] * 3,
-                             [cfg.kp_range[0]] * NUM_JOINTS, [cfg.rho_range[0]] * NUM_JOINTS])
-        hi = np.concatenate([[cfg.max_position_delta] * 3, [cfg.max_rotation_delta] * 3,
-                             [cfg.kp_range[1]] * NUM_JOINTS, [cfg.rho_range[1]] * NUM_JOINTS])
+        ranges = {"position": (-cfg.max_position_delta, cfg.max_position_delta),
+                  "rotation": (-cfg.max_rotation_delta, cfg.max_rotation_delta),
+                  "kp": cfg.kp_range, "rho": cfg.rho_range}
+        lo, hi = np.empty(ACTION_DIM), np.empty(ACTION_DIM)
+        for name, part in ACTION_SLICES.items():
+            lo[part], hi[part] = ranges[name]
         self.low, self.high = lo, hi
         self.center, self.half_range = (hi + lo) / 2, (hi - lo) / 2
 
@@ -48,10 +51,10 @@ class ActionToJointTargets(LeafSystem):
         self._tool = tool_frame(self._plant)
         self._base = np.asarray(robot_base, float)
         n = NUM_JOINTS
-        self.DeclareVectorInputPort("action", ACTION_DIM)
-        self.DeclareVectorInputPort("robot_state", 2 * n)
-        self.DeclareVectorInputPort("object_state", 13)  # [q_wxyz, p, w, v]
-        self.DeclareVectorInputPort("object_radius", 1)
+        self._action = self.DeclareVectorInputPort("action", ACTION_DIM)
+        self._robot_state = self.DeclareVectorInputPort("robot_state", ROBOT_STATE_DIM)
+        self._object_state = self.DeclareVectorInputPort("object_state", FREE_BODY_STATE_DIM)
+        self._object_radius = self.DeclareVectorInputPort("object_radius", 1)
         # [q_target (7), kp (7), kd (7), previous physical action (20)]
         self._state = self.DeclareDiscreteState(3 * n + ACTION_DIM)
         self.DeclarePeriodicDiscreteUpdateEvent(clock.period, clock.offset, self._latch)
@@ -81,28 +84,28 @@ class ActionToJointTargets(LeafSystem):
         phys = self._scaling.to_physical(check_action(action))
         X_BT = self.ee_pose(q)
         p_ee = X_BT.translation()
-        target = p_ee + phys[:3]
+        target = p_ee + phys[ACTION_SLICES["position"]]
         obj = np.asarray(object_position) - self._base
         reach = object_radius + cfg.object_margin
         target = np.clip(target, obj - reach, obj + reach)
         target = np.clip(target, p_ee - cfg.ee_clamp, p_ee + cfg.ee_clamp)
-        e = np.concatenate([target - p_ee, phys[3:6]])
+        e = np.concatenate([target - p_ee, phys[ACTION_SLICES["rotation"]]])
         # Rows: angular then translational velocity of the tool frame (Drake's spatial order).
         J = self._plant.CalcJacobianSpatialVelocity(
             self._plant_context, JacobianWrtVariable.kQDot, self._tool, np.zeros(3),
             self._plant.world_frame(), self._plant.world_frame())
         J = np.vstack([J[3:], J[:3]])  # -> [linear; angular] to match e
         dq = J.T @ np.linalg.solve(J @ J.T + cfg.ik_damping * np.eye(6), e)
-        kp = phys[6:13]
-        kd = phys[13:20] * np.sqrt(kp)
+        kp = phys[ACTION_SLICES["kp"]]
+        kd = phys[ACTION_SLICES["rho"]] * np.sqrt(kp)
         return q + dq, kp, kd, phys
 
     # --- events and outputs ------------------------------------------------------------------
     def _latch(self, context, discrete_state):
-        x = self.get_input_port(1).Eval(context)
-        q_t, kp, kd, phys = self.targets(self.get_input_port(0).Eval(context), x[:NUM_JOINTS],
-                                         self.get_input_port(2).Eval(context)[4:7],
-                                         float(self.get_input_port(3).Eval(context)[0]))
+        x = self._robot_state.Eval(context)
+        q_t, kp, kd, phys = self.targets(self._action.Eval(context), x[:NUM_JOINTS],
+                                         self._object_state.Eval(context)[FREE_BODY_POSITION],
+                                         float(self._object_radius.Eval(context)[0]))
         discrete_state.set_value(self._state, np.concatenate([q_t, kp, kd, phys]))
 
     def _calc_q_target(self, context, output: BasicVector):

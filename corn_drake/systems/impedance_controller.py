@@ -22,7 +22,7 @@ from pydrake.symbolic import MakeVectorVariable, max as sym_max, min as sym_min
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import Multiplexer, SymbolicVectorSystem
 
-from corn_drake.scene.franka import NUM_JOINTS
+from corn_drake.contract import NUM_JOINTS, ROBOT_STATE_DIM
 
 N = NUM_JOINTS
 
@@ -51,43 +51,46 @@ class VariableImpedanceController(LeafSystem):
         super().__init__()
         self._limits = _check_limits(effort_limits)
         self._with_noise = with_noise
-        self.DeclareVectorInputPort("robot_state", 2 * N)
-        self.DeclareVectorInputPort("q_target", N)
-        self.DeclareVectorInputPort("gains", 2 * N)
-        self.DeclareVectorInputPort("noise_std", 1)
+        self._robot_state = self.DeclareVectorInputPort("robot_state", ROBOT_STATE_DIM)
+        self._q_target = self.DeclareVectorInputPort("q_target", N)
+        self._gains = self.DeclareVectorInputPort("gains", 2 * N)
+        self._noise_std = self.DeclareVectorInputPort("noise_std", 1)
         if with_noise:
-            self.DeclareVectorInputPort("unit_noise", N)
+            self._unit_noise = self.DeclareVectorInputPort("unit_noise", N)
         self.DeclareVectorOutputPort("actuation", N, self._calc_tau)
 
     def _calc_tau(self, context, output: BasicVector):
-        x = self.get_input_port(0).Eval(context)
-        gains = self.get_input_port(2).Eval(context)
+        x = self._robot_state.Eval(context)
+        gains = self._gains.Eval(context)
         noise = None
         if self._with_noise:
-            noise = self.get_input_port(3).Eval(context)[0] * self.get_input_port(4).Eval(context)
-        output.SetFromVector(impedance_torque(x[:N], x[N:], self.get_input_port(1).Eval(context),
+            noise = self._noise_std.Eval(context)[0] * self._unit_noise.Eval(context)
+        output.SetFromVector(impedance_torque(x[:N], x[N:], self._q_target.Eval(context),
                                               gains[:N], gains[N:], self._limits, np.clip, noise))
 
 
 def make_symbolic_impedance_controller(effort_limits, with_noise: bool = False) -> Diagram:
     """The same law as a C++ SymbolicVectorSystem, with VariableImpedanceController's ports."""
     limits = _check_limits(effort_limits)
-    sizes = [2 * N, N, 2 * N, 1] + ([N] if with_noise else [])
-    names = ["robot_state", "q_target", "gains", "noise_std"] + (["unit_noise"] if with_noise else [])
+    inputs = {"robot_state": ROBOT_STATE_DIM, "q_target": N, "gains": 2 * N, "noise_std": 1}
+    if with_noise:
+        inputs["unit_noise"] = N
+    sizes = list(inputs.values())
     u = MakeVectorVariable(sum(sizes), "u")
-    parts = np.split(u, np.cumsum(sizes)[:-1])
-    x, q_target, gains, std = parts[:4]
+    part = dict(zip(inputs, np.split(u, np.cumsum(sizes)[:-1])))
+    x, q_target, gains, std = part["robot_state"], part["q_target"], part["gains"], part["noise_std"]
     # numpy reports floating-point flags that Drake's symbolic arithmetic leaves set as
     # "invalid value" warnings on object arrays; the expressions themselves are exact.
     with np.errstate(invalid="ignore"):
-        noise = std[0] * parts[4] if with_noise else None
+        noise = std[0] * part["unit_noise"] if with_noise else None
         tau = impedance_torque(x[:N], x[N:], q_target, gains[:N], gains[N:], limits,
                                _symbolic_clip, noise)
     builder = DiagramBuilder()
     mux = builder.AddNamedSystem("inputs", Multiplexer(sizes))
     law = builder.AddNamedSystem("torque_law", SymbolicVectorSystem(input=u, output=tau))
     builder.Connect(mux.get_output_port(), law.get_input_port())
-    for i, name in enumerate(names):
+    # The Multiplexer's inputs are positional, in `inputs` order; the diagram names them.
+    for i, name in enumerate(inputs):
         builder.ExportInput(mux.get_input_port(i), name)
     builder.ExportOutput(law.get_output_port(), "actuation")
     return builder.Build()

@@ -1,11 +1,10 @@
 """TeacherObservations: the privileged observation of the teacher policy.
 
-cloud (N x 3, flattened): the object's fixed surface sample moved rigidly to its current pose;
-hand_state (9): tool position + 6D rotation, world frame; robot_state (14): [q, qdot];
-previous_action (20, physical units); goal (9): goal position minus object position + 6D of
-R_goal R_obj^T; physics (5): mass, table / object / finger friction, restitution;
-object_keypoints (24): the 8 bounding-box corners at the current pose, world frame (the input
-of the `state` baseline, which sees no cloud).
+Keys and shapes are the contract's (corn_drake/contract.py): cloud (the object's fixed surface
+sample moved rigidly to its current pose), hand_state, robot_state, previous_action (physical
+units), goal (goal position minus object position + 6D of R_goal R_obj^T), physics and
+object_keypoints (the bounding-box corners at the current pose, the input of the `state`
+baseline, which sees no cloud).
 
 Everything is computed once per state into the cached `observation` output (ObservationLayout
 packs and unpacks it); the named per-key outputs are slices of it for readers of one signal.
@@ -19,21 +18,19 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from corn_drake.contract import (ACTION_DIM, FREE_BODY_STATE_DIM, KEYPOINTS_DIM, OBS_KEYS,
+                                 PHYSICS_DIM, POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION,
+                                 POSITION_DIM, ROBOT_STATE_DIM,
+                                 free_body_pose, observation_shapes, slice_size)
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame
-from corn_drake.systems.ik import ACTION_DIM
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix
-
-OBS_KEYS = ("cloud", "hand_state", "robot_state", "previous_action", "goal", "physics",
-            "object_keypoints")
 
 
 class ObservationLayout:
-    """Offsets of each key in the packed observation vector."""
+    """Offsets of each key in the packed observation vector (keys in OBS_KEYS order)."""
 
     def __init__(self, num_points: int):
-        self.shapes = {"cloud": (num_points, 3), "hand_state": (9,), "robot_state": (2 * NUM_JOINTS,),
-                       "previous_action": (ACTION_DIM,), "goal": (9,), "physics": (5,),
-                       "object_keypoints": (24,)}
+        self.shapes = observation_shapes(num_points)
         sizes = [int(np.prod(self.shapes[k])) for k in OBS_KEYS]
         ends = np.cumsum(sizes)
         self.slices = {k: slice(int(e - n), int(e)) for k, n, e in zip(OBS_KEYS, sizes, ends)}
@@ -41,11 +38,6 @@ class ObservationLayout:
 
     def unpack(self, packed: np.ndarray, dtype=np.float32) -> dict[str, np.ndarray]:
         return {k: np.asarray(packed[s], dtype).reshape(self.shapes[k]) for k, s in self.slices.items()}
-
-
-def object_pose_from_state(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(position, rotation matrix) from a free body's 13-D state [q_wxyz, p, w, v]."""
-    return x[4:7], quat_wxyz_to_matrix(x[:4])
 
 
 class TeacherObservations(LeafSystem):
@@ -57,12 +49,12 @@ class TeacherObservations(LeafSystem):
         self._tool = tool_frame(self._plant)
         self._X_WB = RigidTransform(np.asarray(robot_base, float))
         self._in = {name: self.DeclareVectorInputPort(name, size) for name, size in (
-            ("robot_state", 2 * NUM_JOINTS), ("object_state", 13), ("previous_action", ACTION_DIM),
-            ("goal_pose", 7), ("physics_params", 5), ("object_cloud", 3 * num_points),
-            ("object_corners", 24))}
+            ("robot_state", ROBOT_STATE_DIM), ("object_state", FREE_BODY_STATE_DIM),
+            ("previous_action", ACTION_DIM), ("goal_pose", POSE7_DIM), ("physics_params", PHYSICS_DIM),
+            ("object_cloud", POSITION_DIM * num_points), ("object_corners", KEYPOINTS_DIM))}
         self._packed = self.DeclareVectorOutputPort("observation", self.layout.size, self._calc_packed)
         for key in OBS_KEYS:
-            self.DeclareVectorOutputPort(key, self.layout.slices[key].stop - self.layout.slices[key].start,
+            self.DeclareVectorOutputPort(key, slice_size(self.layout.slices[key]),
                                          self._slice_calculator(key))
 
     def tool_pose(self, q: np.ndarray) -> RigidTransform:
@@ -75,17 +67,17 @@ class TeacherObservations(LeafSystem):
             return self._in[name].Eval(context)
 
         x = get("robot_state")
-        p, R = object_pose_from_state(get("object_state"))
+        p, R = free_body_pose(get("object_state"))
         X_tool = self.tool_pose(x[:NUM_JOINTS])
         g = get("goal_pose")
         parts = {
-            "cloud": get("object_cloud").reshape(-1, 3) @ R.T + p,
+            "cloud": get("object_cloud").reshape(-1, POSITION_DIM) @ R.T + p,
             "hand_state": pose9(X_tool.translation(), X_tool.rotation().matrix()),
             "robot_state": x,
             "previous_action": get("previous_action"),
-            "goal": pose9(g[:3] - p, quat_wxyz_to_matrix(g[3:]) @ R.T),
+            "goal": pose9(g[POSE7_POSITION] - p, quat_wxyz_to_matrix(g[POSE7_QUATERNION]) @ R.T),
             "physics": get("physics_params"),
-            "object_keypoints": get("object_corners").reshape(-1, 3) @ R.T + p,
+            "object_keypoints": get("object_corners").reshape(-1, POSITION_DIM) @ R.T + p,
         }
         out = output.get_mutable_value()
         for key, s in self.layout.slices.items():

@@ -12,10 +12,10 @@ one immutable TrackerState in the context's abstract state, replaced by unrestri
 the tracker. Bad input never raises: an empty or non-finite cloud, an ICP with too few
 correspondences or an implausible jump keeps the last pose and reports ok = 0.
 
-Inputs: ``object_cloud`` (PointCloud, world frame), ``initial_pose`` (7: xyz + wxyz; read when
-the tracker (re)initializes, e.g. the known start pose), ``goal_pose`` (7).
-Outputs: ``pose`` (7), ``status`` (STATUS_FIELDS), ``goal`` (9: goal position minus estimated
-position, 6D of R_goal R_est^T, like TeacherObservations' goal).
+Inputs: ``object_cloud`` (PointCloud, world frame), ``initial_pose`` (pose7: xyz + wxyz; read
+when the tracker (re)initializes, e.g. the known start pose), ``goal_pose`` (pose7).
+Outputs: ``pose`` (pose7), ``status`` (STATUS_FIELDS), ``goal`` (GOAL_DIM: goal position minus
+estimated position, 6D of R_goal R_est^T, like TeacherObservations' goal).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import EventStatus, LeafSystem
 
+from corn_drake.contract import GOAL_DIM, POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix, rotation_angle
 
 STATUS_FIELDS = ("ok", "fitness", "inlier_rmse", "num_points", "reregistered")
@@ -47,8 +48,8 @@ class TrackerState:
 def pose7_to_matrix(p7) -> np.ndarray:
     p7 = np.asarray(p7, float)
     X = np.eye(4)
-    X[:3, :3] = quat_wxyz_to_matrix(p7[3:7])
-    X[:3, 3] = p7[:3]
+    X[:3, :3] = quat_wxyz_to_matrix(p7[POSE7_QUATERNION])
+    X[:3, 3] = p7[POSE7_POSITION]
     return X
 
 
@@ -158,17 +159,17 @@ class PoseTracker(LeafSystem):
         self.cfg = cfg
         self._point_to_plane = not thin
         self._state_index = self.DeclareAbstractState(AbstractValue.Make(TrackerState()))
-        self.DeclareAbstractInputPort("object_cloud", AbstractValue.Make(PointCloud()))
-        self.DeclareVectorInputPort("initial_pose", 7)
-        self.DeclareVectorInputPort("goal_pose", 7)
+        self._cloud = self.DeclareAbstractInputPort("object_cloud", AbstractValue.Make(PointCloud()))
+        self._initial_pose = self.DeclareVectorInputPort("initial_pose", POSE7_DIM)
+        self._goal_pose = self.DeclareVectorInputPort("goal_pose", POSE7_DIM)
         state_only = {self.abstract_state_ticket(self._state_index)}
-        self.DeclareVectorOutputPort("pose", 7, self._calc_pose, prerequisites_of_calc=state_only)
+        self.DeclareVectorOutputPort("pose", POSE7_DIM, self._calc_pose, prerequisites_of_calc=state_only)
         self.DeclareVectorOutputPort("status", len(STATUS_FIELDS), self._calc_status,
                                      prerequisites_of_calc=state_only)
         self.DeclareVectorOutputPort(
-            "goal", 9, self._calc_goal,
+            "goal", GOAL_DIM, self._calc_goal,
             prerequisites_of_calc={self.abstract_state_ticket(self._state_index),
-                                   self.input_port_ticket(self.GetInputPort("goal_pose").get_index())})
+                                   self.input_port_ticket(self._goal_pose.get_index())})
         self.DeclareInitializationUnrestrictedUpdateEvent(self._on_update)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._on_update)
         self.DeclareForcedUnrestrictedUpdateEvent(self._on_update)
@@ -181,17 +182,17 @@ class PoseTracker(LeafSystem):
         """Forget everything: the next update re-initializes from ``initial_pose``."""
         context.get_mutable_abstract_state(self._state_index).set_value(TrackerState())
 
-    def _cloud(self, context) -> np.ndarray:
-        return self.GetInputPort("object_cloud").Eval(context).xyzs().T
+    def _cloud_points(self, context) -> np.ndarray:
+        return self._cloud.Eval(context).xyzs().T
 
     def next_state(self, context) -> TrackerState:
         state = self.tracker_state(context)
         try:
-            cloud = self._cloud(context)
+            cloud = self._cloud_points(context)
         except Exception:
             cloud = np.zeros((0, 3))
         if not state.initialized:
-            return initial_state(pose7_to_matrix(self.GetInputPort("initial_pose").Eval(context)),
+            return initial_state(pose7_to_matrix(self._initial_pose.Eval(context)),
                                  cloud, self.cfg)
         return track_step(state, cloud, self.cfg, self._point_to_plane)
 
@@ -208,8 +209,9 @@ class PoseTracker(LeafSystem):
 
     def _calc_goal(self, context, output):
         X = self.tracker_state(context).X
-        g = self.GetInputPort("goal_pose").Eval(context)
-        output.SetFromVector(pose9(g[:3] - X[:3, 3], quat_wxyz_to_matrix(g[3:]) @ X[:3, :3].T))
+        g = self._goal_pose.Eval(context)
+        output.SetFromVector(pose9(g[POSE7_POSITION] - X[:3, 3],
+                                   quat_wxyz_to_matrix(g[POSE7_QUATERNION]) @ X[:3, :3].T))
 
 
 def pose_error(X_est: np.ndarray, X_true: np.ndarray) -> tuple[float, float]:

@@ -19,7 +19,9 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem, O
 from pydrake.systems.primitives import Multiplexer, ZeroOrderHold
 
 from corn_drake.config import TaskConfig
-from corn_drake.systems.observations import object_pose_from_state
+from corn_drake.contract import (FREE_BODY_STATE_DIM, HAND_STATE_DIM, KEYPOINTS_DIM, POSE7_DIM,
+                                 POSE7_POSITION, POSE7_QUATERNION, POSE9_POSITION, POSITION_DIM,
+                                 free_body_pose)
 from corn_drake.timing import PolicyClock
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
@@ -38,7 +40,15 @@ def pose_errors(p, R, p_goal, R_goal) -> tuple[float, float]:
     return float(np.linalg.norm((p_goal - p)[:2])), rotation_angle(R_goal @ R.T)
 
 
-PREVIOUS_SIZE = 13 + 9 + 1  # held [object_state, hand_state, energy]
+# The previous policy step, held as one vector: [object_state, hand_state, energy].
+PREVIOUS_PARTS = (FREE_BODY_STATE_DIM, HAND_STATE_DIM, 1)
+PREVIOUS_SIZE = sum(PREVIOUS_PARTS)
+
+
+def split_previous(held: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(object_state, hand_state, energy) of the held previous-step vector."""
+    object_state, hand_state, energy = np.split(held, np.cumsum(PREVIOUS_PARTS)[:-1])
+    return object_state, hand_state, float(energy[0])
 
 
 class TaskReward(LeafSystem):
@@ -46,24 +56,24 @@ class TaskReward(LeafSystem):
         super().__init__()
         self._cfg = cfg
         self._substeps = physics_steps_per_policy_step
-        self.DeclareVectorInputPort("object_state", 13)
-        self.DeclareVectorInputPort("hand_state", 9)
-        self.DeclareVectorInputPort("goal_pose", 7)
-        self.DeclareVectorInputPort("object_keypoints", 24)
-        self.DeclareVectorInputPort("energy", 1)
-        self.DeclareVectorInputPort("previous", PREVIOUS_SIZE)
+        self._object_state = self.DeclareVectorInputPort("object_state", FREE_BODY_STATE_DIM)
+        self._hand_state = self.DeclareVectorInputPort("hand_state", HAND_STATE_DIM)
+        self._goal_pose = self.DeclareVectorInputPort("goal_pose", POSE7_DIM)
+        self._keypoints = self.DeclareVectorInputPort("object_keypoints", KEYPOINTS_DIM)
+        self._energy = self.DeclareVectorInputPort("energy", 1)
+        self._previous = self.DeclareVectorInputPort("previous", PREVIOUS_SIZE)
         self.DeclareVectorOutputPort("reward", 1, self._calc_reward)
         self._status_port = self.DeclareVectorOutputPort("task_status", len(STATUS_FIELDS),
                                                          self._calc_status)
 
     def _goal(self, context):
-        g = self.get_input_port(2).Eval(context)
-        return g[:3], quat_wxyz_to_matrix(g[3:])
+        g = self._goal_pose.Eval(context)
+        return g[POSE7_POSITION], quat_wxyz_to_matrix(g[POSE7_QUATERNION])
 
     def potentials(self, context, object_state, tool_position) -> tuple[float, float]:
         cfg = self._cfg
-        p, R = object_pose_from_state(object_state)
-        corners = self.get_input_port(3).Eval(context).reshape(8, 3)
+        p, R = free_body_pose(object_state)
+        corners = self._keypoints.Eval(context).reshape(-1, POSITION_DIM)
         phi_obj = keypoint_potential(corners, p, R, *self._goal(context), cfg.keypoint_k1,
                                      cfg.keypoint_k2)
         phi_hand = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * float(np.linalg.norm(tool_position - p)))
@@ -71,7 +81,7 @@ class TaskReward(LeafSystem):
 
     def status(self, context) -> np.ndarray:
         cfg = self._cfg
-        p, R = object_pose_from_state(self.get_input_port(0).Eval(context))
+        p, R = free_body_pose(self._object_state.Eval(context))
         p_goal, R_goal = self._goal(context)
         pos_err, ori_err = pose_errors(p, R, p_goal, R_goal)
         oriented = not cfg.check_orientation or ori_err <= cfg.success_orientation
@@ -81,14 +91,14 @@ class TaskReward(LeafSystem):
 
     def _calc_reward(self, context, output: BasicVector):
         cfg = self._cfg
-        prev = self.get_input_port(5).Eval(context)
-        prev_obj, prev_hand = self.potentials(context, prev[:13], prev[13:16])
-        phi_obj, phi_hand = self.potentials(context, self.get_input_port(0).Eval(context),
-                                            self.get_input_port(1).Eval(context)[:3])
+        prev_object, prev_hand_state, prev_energy = split_previous(self._previous.Eval(context))
+        prev_obj, prev_hand = self.potentials(context, prev_object, prev_hand_state[POSE9_POSITION])
+        phi_obj, phi_hand = self.potentials(context, self._object_state.Eval(context),
+                                            self._hand_state.Eval(context)[POSE9_POSITION])
         success = self._status_port.Eval(context)[0] > 0  # cached: computed once per state
         obj_term = cfg.success_reward if success else cfg.potential_gamma * phi_obj - prev_obj
         hand_term = np.clip(cfg.potential_gamma * phi_hand - prev_hand, -cfg.hand_clip, cfg.hand_clip)
-        energy = (self.get_input_port(4).Eval(context)[0] - prev[-1]) / self._substeps
+        energy = (self._energy.Eval(context)[0] - prev_energy) / self._substeps
         output.SetFromVector([obj_term + hand_term - cfg.energy_coef * energy])
 
     def _calc_status(self, context, output: BasicVector):
@@ -104,7 +114,7 @@ def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, clock: PolicyClock
     starts from it.
     """
     reward = builder.AddNamedSystem(name, TaskReward(cfg, clock.substeps))
-    mux = builder.AddNamedSystem(f"{name}.previous_inputs", Multiplexer([13, 9, 1]))
+    mux = builder.AddNamedSystem(f"{name}.previous_inputs", Multiplexer(list(PREVIOUS_PARTS)))
     hold = builder.AddNamedSystem(f"{name}.previous", ZeroOrderHold(clock.period, PREVIOUS_SIZE,
                                                                    clock.offset))
     for i, port in enumerate((object_state, hand_state, energy)):
@@ -120,5 +130,6 @@ def add_task_reward(builder: DiagramBuilder, cfg: TaskConfig, clock: PolicyClock
 def reset_previous(hold: ZeroOrderHold, reward: TaskReward, root_context) -> None:
     """Sets the hold to the current [object_state, hand_state, energy] of `root_context`."""
     ctx = reward.GetMyContextFromRoot(root_context)
-    current = np.concatenate([reward.get_input_port(i).Eval(ctx) for i in (0, 1, 4)])
+    current = np.concatenate([reward.GetInputPort(port).Eval(ctx)
+                              for port in ("object_state", "hand_state", "energy")])
     hold.GetMyMutableContextFromRoot(root_context).SetDiscreteState(current)

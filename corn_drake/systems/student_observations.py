@@ -7,19 +7,21 @@ Both stds are in metres (StudentObservationConfig converts the paper's normalise
 numbers). The unit noise comes in on ``cloud_unit_noise`` / ``goal_unit_noise`` from Drake
 RandomSources, seeded through the context like any other random input
 (diagrams.reseed_random_sources draws fresh seeds per episode).
-hand_state (9), robot_state (14), previous_action (20): as the teacher's.
+hand_state, robot_state, previous_action: as the teacher's. Keys and sizes are the contract's
+(STUDENT_OBS_KEYS, student_observation_shapes).
 """
 
 from __future__ import annotations
 
+import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from corn_drake.contract import (GOAL_DIM, POSE9_POSITION, STUDENT_OBS_KEYS, slice_size,
+                                 student_observation_shapes)
 from corn_drake.errors import InputError
-from corn_drake.scene.franka import NUM_JOINTS
-from corn_drake.systems.ik import ACTION_DIM
 
-STUDENT_OBS_KEYS = ("cloud", "hand_state", "robot_state", "previous_action", "goal")
-GOAL_DIM = 9  # position (3) + the first two columns of the rotation (6)
+# Copied through unchanged from the teacher-side signals of the same name.
+PASSED_THROUGH = ("hand_state", "robot_state", "previous_action")
 
 
 class StudentObservations(LeafSystem):
@@ -29,36 +31,32 @@ class StudentObservations(LeafSystem):
             if not std >= 0:  # also rejects NaN
                 raise InputError(f"observation.{name} must be >= 0 (metres), got {std}")
         self._cloud_std, self._goal_std = float(cloud_noise_std), float(goal_noise_std)
-        n3 = 3 * num_points
-        self.DeclareVectorInputPort("points", n3)
-        self.DeclareVectorInputPort("cloud_unit_noise", n3)
-        self.DeclareVectorInputPort("goal_unit_noise", 3)
-        self.DeclareVectorInputPort("hand_state", 9)
-        self.DeclareVectorInputPort("robot_state", 2 * NUM_JOINTS)
-        self.DeclareVectorInputPort("previous_action", ACTION_DIM)
-        self.DeclareVectorInputPort("estimated_goal", GOAL_DIM)
-        self.DeclareVectorOutputPort("cloud", n3, self._calc_cloud)
-        self.DeclareVectorOutputPort("goal", GOAL_DIM, self._calc_goal)
-        for key, port, size in (("hand_state", "hand_state", 9),
-                                ("robot_state", "robot_state", 2 * NUM_JOINTS),
-                                ("previous_action", "previous_action", ACTION_DIM)):
-            self.DeclareVectorOutputPort(key, size, self._copier(port))
+        size = {k: int(np.prod(shape)) for k, shape in student_observation_shapes(num_points).items()}
+        self._points = self.DeclareVectorInputPort("points", size["cloud"])
+        self._cloud_noise = self.DeclareVectorInputPort("cloud_unit_noise", size["cloud"])
+        self._goal_noise = self.DeclareVectorInputPort("goal_unit_noise", slice_size(POSE9_POSITION))
+        passed = {k: self.DeclareVectorInputPort(k, size[k]) for k in PASSED_THROUGH}
+        self._estimated_goal = self.DeclareVectorInputPort("estimated_goal", GOAL_DIM)
+        calc = {"cloud": self._calc_cloud, "goal": self._calc_goal}
+        for key in STUDENT_OBS_KEYS:
+            self.DeclareVectorOutputPort(key, size[key], calc.get(key) or self._copier(passed[key]))
 
-    def _copier(self, port_name):
+    @staticmethod
+    def _copier(port):
         def calc(context, output):
-            output.SetFromVector(self.GetInputPort(port_name).Eval(context))
+            output.SetFromVector(port.Eval(context))
         return calc
 
     def _calc_cloud(self, context, output):
-        pts = self.GetInputPort("points").Eval(context)
+        pts = self._points.Eval(context)
         if self._cloud_std > 0:
-            pts = pts + self._cloud_std * self.GetInputPort("cloud_unit_noise").Eval(context)
+            pts = pts + self._cloud_std * self._cloud_noise.Eval(context)
         output.SetFromVector(pts)
 
     def _calc_goal(self, context, output):
-        goal = self.GetInputPort("estimated_goal").Eval(context).copy()
+        goal = self._estimated_goal.Eval(context).copy()
         if self._goal_std > 0:
             # Position only: the paper's goal-pose noise is on the normalised input, and the
-            # normalisation (/0.4) only applies to positions.
-            goal[:3] += self._goal_std * self.GetInputPort("goal_unit_noise").Eval(context)
+            # normalisation only applies to positions.
+            goal[POSE9_POSITION] += self._goal_std * self._goal_noise.Eval(context)
         output.SetFromVector(goal)
