@@ -210,10 +210,8 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
     `stochastic_policy`, it samples its actions: a RandomSource named "policy_noise" feeds it
     N(0, 1) draws, a fresh one every policy period (reseed_random_sources seeds it per episode).
     """
-    from corn_drake.systems.policy import PolicySystem, SampledActions
+    from corn_drake.systems.policy import PolicySystem
 
-    if isinstance(agent, SampledActions):
-        agent, stochastic_policy = agent.agent, True
     if stochastic_policy and agent is None:
         raise ValueError("stochastic_policy needs an agent: without one the action is an input")
     cfg = cfg or load_teacher_config()

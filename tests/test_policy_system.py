@@ -8,7 +8,6 @@ from corn_drake.contract import ACTION_DIM
 from corn_drake.evaluation import run_episode
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.env import TeacherEnv
-from corn_drake.systems.policy import SampledActions
 
 
 def test_policy_system_matches_training_path_and_runs_closed_loop():
@@ -79,7 +78,7 @@ def test_stochastic_evaluation_samples_from_a_random_source_seeded_per_episode()
     agent.eval()
     with torch.no_grad():
         agent.log_std.fill_(-1.0)
-    stochastic = TeacherEnv(agent=SampledActions(agent))
+    stochastic = TeacherEnv(agent=agent, stochastic_policy=True)
     deterministic = TeacherEnv(agent=agent)
     assert stochastic.handles.policy.stochastic and not deterministic.handles.policy.stochastic
     assert not deterministic.handles.policy.HasInputPort("unit_noise")

@@ -103,16 +103,13 @@ def run(args) -> int:
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         policy = base.policy
-        if args.stochastic:
-            from corn_drake.systems.policy import SampledActions
-
-            agent = SampledActions(agent)  # the diagram samples: RandomSource seeded per episode
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
+    # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
-                      out_dir)
+                      out_dir, stochastic=args.stochastic)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],
                    "split": args.split, "actions": "sampled" if args.stochastic else "mean"})

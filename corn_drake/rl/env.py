@@ -27,13 +27,16 @@ class TeacherEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, config: TeacherDiagramConfig | str | Path | None = None,
-                 spec: ObjectSpec | None = None, meshcat=None, agent=None):
+                 spec: ObjectSpec | None = None, meshcat=None, agent=None,
+                 stochastic_policy: bool = False):
         """With `agent`, a PolicySystem inside the diagram chooses the actions (the evaluation
-        diagram) and step() takes none."""
+        diagram) and step() takes none; with `stochastic_policy` it samples them (a RandomSource
+        the episode's seed reseeds) instead of taking the mean."""
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
         self.cfg = config
-        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent)
+        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent,
+                                                             stochastic_policy)
         if len(self.handles.scene.object_spec.stable_poses) == 0:
             raise ValueError(f"object {self.handles.scene.object_spec.name} has no stable poses")
         self.meshcat = meshcat

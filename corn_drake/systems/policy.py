@@ -16,7 +16,6 @@ once per episode) makes an episode a function of its seed; the agent holds no ra
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -50,13 +49,3 @@ class PolicySystem(LeafSystem):
             output.SetFromVector(self._agent.act(obs))
         else:
             output.SetFromVector(self._agent.act(obs, self._unit_noise.Eval(context)))
-
-
-@dataclasses.dataclass(frozen=True)
-class SampledActions:
-    """An agent handed to a diagram builder to be run stochastically: build_teacher_diagram
-    treats `agent=SampledActions(a)` as `agent=a, stochastic_policy=True`. It exists for callers
-    that reach build_teacher_diagram only through an `agent` argument (TeacherEnv); new code
-    passes stochastic_policy=True directly."""
-
-    agent: object
