@@ -16,7 +16,6 @@ once per episode) makes an episode a function of its seed; the agent holds no ra
 
 from __future__ import annotations
 
-
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
