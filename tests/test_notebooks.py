@@ -60,3 +60,26 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
         text = _text_outputs(nb)
         assert "before the fidelity fixes" in text and "after the fidelity fixes" in text
         assert "not labelled here" not in text
+
+
+def test_library_plots_leave_the_notebook_backend_alone(tmp_path):
+    """Notebooks train in their kernel (03, 04): the PNG writers of pretraining and training must
+    not switch that kernel's matplotlib backend, or later figures stop showing inline."""
+    import matplotlib
+
+    from corn_drake.rl.trainer import plot_learning_curves
+
+    inline = "module://matplotlib_inline.backend_inline"
+    previous = matplotlib.get_backend()
+    matplotlib.use(inline)
+    try:
+        history = [{"step": 32 * (i + 1), "episodes": 50, "success_rate": 0.1 * i, "return": -0.1}
+                   for i in range(4)]
+        plot_learning_curves({"state": history}, tmp_path / "curve.png")
+        assert matplotlib.get_backend() == inline
+        assert (tmp_path / "curve.png").stat().st_size > 1000
+    finally:
+        matplotlib.use(previous)
+    switching = [str(p.relative_to(REPO_ROOT)) for p in (REPO_ROOT / "corn_drake").rglob("*.py")
+                 if "matplotlib.use(" in p.read_text()]
+    assert not switching, switching
