@@ -35,8 +35,8 @@ $(STAMP): pyproject.toml setup.py
 test: install
 	$(BIN)/python -m pytest -q
 
-# The quick loop while editing: skips the tests marked slow (demo, notebooks, training
-# subprocesses, the fresh non-editable install).
+# The quick loop while editing: skips the tests marked slow (the demo, notebooks 02-03, a
+# procedural library, training subprocesses, the fresh non-editable install).
 test-fast: install
 	$(BIN)/python -m pytest -q -m "not slow"
 

@@ -15,6 +15,8 @@ from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
+pytestmark = pytest.mark.slow  # the module's library takes minutes to build
+
 KEYS = {"id", "source", "family", "split", "unseen_group", "radius", "mass", "thin", "hulls", "visual", "cloud",
         "stable_poses"}
 
