@@ -1,39 +1,142 @@
-"""Typed configs for the student rollout diagram (diagrams/student_rollout.yaml).
+"""Typed configs for the student rollout diagram (base: diagrams/student_rollout.yaml).
 
 The teacher part is the teacher's own TeacherDiagramConfig; cameras, segmentation, tracker and
-the student's observation noise are added here. No `from __future__ import annotations`:
-yaml_load_typed needs real types on the fields.
+the student's observation noise are added here. Every default is the value the student diagram
+runs with; diagrams/student_rollout.yaml names only what the student changes in the teacher's
+settings. `StudentDiagramConfig.check()` raises an InputError naming the field for a value the
+diagram cannot run with (the loader and the diagram builder call it).
+No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
 """
 
 
+import copyreg
 import dataclasses as dc
+import math
+
+from pydrake.systems.sensors import CameraConfig
 
 from corn_drake.config import TeacherDiagramConfig
+from corn_drake.errors import InputError
 
 # The authors' three eyes (official code), in the table frame = our world frame.
 DEFAULT_EYES = [[0.458, -0.40, 0.740], [-0.238, 0.388, 0.694], [-0.408, -0.328, 0.706]]
+
+CAMERA_MODES = ("fixed", "tracking")
+SEGMENTATION_MODES = ("geometric", "ground_truth")
+OUTLIER_SCALINGS = ("pixel_density", "none")
+
+# CameraConfig fields the rig cannot honour, and why. They must keep Drake's defaults, so a value
+# set there is refused instead of silently ignored.
+UNUSED_CAMERA_FIELDS = {
+    "X_PB": "each camera's pose comes from cameras.eyes and look_at (or the aim, in tracking mode)",
+    "X_BC": "the color and depth sensors sit at the camera body (the clouds use its pose)",
+    "X_BD": "the color and depth sensors sit at the camera body (the clouds use its pose)",
+    "fps": "images are rendered when the segmentation asks, once per policy step",
+    "capture_offset": "images are rendered when the segmentation asks, once per policy step",
+    "output_delay": "images are rendered when the segmentation asks, once per policy step",
+    "do_compress": "nothing is published over LCM",
+    "lcm_bus": "nothing is published over LCM",
+}
+
+
+def default_camera() -> CameraConfig:
+    """One camera's settings, shared by every eye of the rig (Drake's own camera config)."""
+    return CameraConfig(
+        # 128 x 96 runs the whole chain well above 30 Hz here (corn-drake bench perception).
+        width=128, height=96,
+        # Fixed mode: 50 deg vertical field of view covers the 0.4 x 0.5 m table from every eye.
+        focal=CameraConfig.FovDegrees(y=50.0),
+        clipping_near=0.01, clipping_far=2.0, z_near=0.01, z_far=2.0,
+        renderer_name="perception_vtk", renderer_class="RenderEngineVtk",
+        # System names camera0, camera1, ...; the chain reads depth (and the label image in
+        # ground-truth segmentation); nothing reads color.
+        name="camera", rgb=False, depth=True, label=True)
+
+
+def _camera_config_from_yaml(text: str) -> CameraConfig:
+    from pydrake.common.yaml import yaml_load_typed
+
+    return yaml_load_typed(schema=CameraConfig, data=text)
+
+
+def _reduce_camera_config(camera: CameraConfig):
+    from pydrake.common.yaml import yaml_dump_typed
+
+    return _camera_config_from_yaml, (yaml_dump_typed(camera),)
+
+
+# Drake's config structs do not pickle; a student config travels to Ray workers like the
+# teacher's, so a CameraConfig travels as its YAML (the text a run's config.yaml holds for it).
+copyreg.pickle(CameraConfig, _reduce_camera_config)
+
+
+def _check_point(name: str, value) -> None:
+    if len(value) != 3 or not all(math.isfinite(v) for v in value):
+        raise InputError(f"{name} must be 3 finite numbers (x, y, z in metres), got {value}")
+
+
+def _check_positive(prefix: str, obj, names) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:  # also rejects NaN
+            raise InputError(f"{prefix}.{name} must be > 0, got {value}")
+
+
+def _same_value(a, b) -> bool:
+    from pydrake.common.schema import Transform
+
+    if isinstance(a, Transform):  # Transform has no ==
+        return (a.base_frame == b.base_frame and a.IsDeterministic()
+                and a.GetDeterministicValue().IsExactlyEqualTo(b.GetDeterministicValue()))
+    return a == b
+
+
+def check_camera(camera: CameraConfig, name: str = "cameras.camera") -> None:
+    """InputError naming the field for a CameraConfig the rig cannot render with."""
+    drake_defaults = CameraConfig()
+    for field, why in UNUSED_CAMERA_FIELDS.items():
+        if not _same_value(getattr(camera, field), getattr(drake_defaults, field)):
+            raise InputError(f"{name}.{field} is not used by the camera rig ({why}); leave it "
+                             f"at Drake's default")
+    if not camera.depth:
+        raise InputError(f"{name}.depth must be true: the perception chain reads depth images")
+    if not camera.name:
+        raise InputError(f"{name}.name must not be empty (it names the camera systems)")
+    try:
+        camera.MakeCameras()  # Drake's own checks: sizes, focal, centre, ranges
+    except RuntimeError as e:
+        raise InputError(f"invalid {name}: {' '.join(str(e).split())}") from None
 
 
 @dc.dataclass
 class CameraRigConfig:
     # "fixed": sensors welded to the world looking at look_at; "tracking": re-aimed at the
-    # object every time SceneGraph evaluates poses (the paper's student cameras).
+    # object every time SceneGraph evaluates poses (the paper's student cameras, 32 x 32 each).
     mode: str = "fixed"
     eyes: list[list[float]] = dc.field(default_factory=lambda: [list(e) for e in DEFAULT_EYES])
     look_at: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.45])
-    # 128 x 96 runs the whole chain well above 30 Hz here (corn-drake bench perception).
-    width: int = 128
-    height: int = 96
-    # Fixed mode: vertical field of view. 50 deg covers the 0.4 x 0.5 m table from every eye.
-    fov_y_deg: float = 50.0
-    # Tracking mode: fov = 2 atan(margin * object radius / eye distance), set once.
+    # Drake's CameraConfig: size, focal (used in fixed mode), clipping and depth ranges,
+    # renderer. Pixels with no return (beyond z_far, nearer than z_near) are dropped downstream.
+    camera: CameraConfig = dc.field(default_factory=default_camera)
+    # Tracking mode: the focal is computed for fov = 2 atan(margin * object radius / eye
+    # distance), set once at construction (camera.focal is not used then).
     tracking_fov_margin: float = 1.3
-    z_near: float = 0.01
-    z_far: float = 2.0
     # Keep the robot out of the images (not what a real camera sees, but what the paper's
     # renderer did: it rasterised the object only). Off by default: our links are primitives
     # (cheap to render) and the segmentation is supposed to remove them.
     hide_robot: bool = False
+
+    def check(self) -> None:
+        if self.mode not in CAMERA_MODES:
+            raise InputError(f"cameras.mode must be one of {', '.join(CAMERA_MODES)}, "
+                             f"got {self.mode!r}")
+        if not self.eyes:
+            raise InputError("cameras.eyes is empty: give at least one camera position")
+        for i, eye in enumerate(self.eyes):
+            _check_point(f"cameras.eyes[{i}]", eye)
+        _check_point("cameras.look_at", self.look_at)
+        _check_positive("cameras", self, ("tracking_fov_margin",))
+        check_camera(self.camera)
 
 
 @dc.dataclass
@@ -55,33 +158,53 @@ class SegmentationConfig:
     # are exactly these primitives, so 5 mm suffices in simulation (1 cm cost 10 % of an
     # object pressed against the finger pads); grow it for a real robot's calibration error.
     robot_margin: float = 0.005
-    # Radius outlier removal: at least n neighbours within r. The paper's n = 96 is for a
-    # D435 at 640 x 480 (about 560 px/m at 0.6 m); n < 0 scales it with this rig's pixel
-    # density (pixels per metre at the eye distance, squared), never below 2.
+    # Radius outlier removal: a point stays with at least n neighbours within outlier_radius.
+    # outlier_min_points is the paper's n = 96, for a D435 at 640 x 480, i.e. at
+    # outlier_reference_px_per_m (about 560 px/m at 0.6 m). outlier_scaling "pixel_density"
+    # scales n by (this rig's px/m / reference)^2 (the ratio of points a patch of surface
+    # gets), never below 2: the default 128 x 96 rig has 174 px/m, n = 9. "none" uses
+    # outlier_min_points as it is (0 or 1 keeps every point).
     outlier_radius: float = 0.02
-    outlier_min_points: int = -1
-    outlier_reference_points: int = 96
+    outlier_scaling: str = "pixel_density"
+    outlier_min_points: int = 96
     outlier_reference_px_per_m: float = 560.0
-    # DBSCAN on what is left; the largest cluster is the object. eps grows to 2.5x the pixel
-    # footprint when the images are coarse (eps below the point spacing splits every face).
+    # DBSCAN on what is left; the largest cluster is the object. eps is at least
+    # dbscan_min_eps_pixels pixel footprints (1 / px_per_m): with coarse images an eps below
+    # the point spacing splits every face into clusters (default rig: 2.5 / 174 = 14 mm).
     dbscan_eps: float = 0.01
+    dbscan_min_eps_pixels: float = 2.5
+    dbscan_min_points: int = 4
     # Above this pixel density (rows per metre at the eye distance) the points left after the
     # crop / table / robot stages are voxel-thinned to 1 / max_px_per_m (4 mm) first, and n and
     # eps are set for that density: a 640 x 480 rig took 1 s per frame without it.
     max_px_per_m: float = 250.0
-    dbscan_min_points: int = 4
     seed: int = 0
+
+    def check(self) -> None:
+        if self.mode not in SEGMENTATION_MODES:
+            raise InputError(f"segmentation.mode must be one of {', '.join(SEGMENTATION_MODES)}, "
+                             f"got {self.mode!r}")
+        if self.outlier_scaling not in OUTLIER_SCALINGS:
+            raise InputError(f"segmentation.outlier_scaling must be one of "
+                             f"{', '.join(OUTLIER_SCALINGS)}, got {self.outlier_scaling!r}")
+        if self.outlier_min_points < 0:
+            raise InputError(f"segmentation.outlier_min_points must be >= 0 (a neighbour count), "
+                             f"got {self.outlier_min_points}")
+        if self.dbscan_min_eps_pixels < 0:
+            raise InputError(f"segmentation.dbscan_min_eps_pixels must be >= 0, "
+                             f"got {self.dbscan_min_eps_pixels}")
+        _check_positive("segmentation", self, (
+            "num_points", "crop_height", "outlier_radius", "outlier_reference_px_per_m",
+            "dbscan_eps", "dbscan_min_points", "max_px_per_m"))
 
 
 @dc.dataclass
 class TrackerConfig:
-    period: float = 0.1  # one estimate per policy step
-    # Offset of the periodic update; < 0 means the PolicyClock's perception offset (time_step / 4):
-    # after the last plant update of each policy step and before the policy's latch reads the
-    # estimate, so the estimate for step k comes from the cloud of the state the policy acts on.
-    offset: float = -1.0
+    # The tracker updates once per policy step, at the PolicyClock's perception offset
+    # (time_step / 4): after the last plant update of each policy step and before the policy's
+    # latch reads the estimate, so the estimate for step k comes from the cloud of the state the
+    # policy acts on (corn_drake.timing; no setting here).
     max_points: int = 2048
-    voxel_size: float = 0.0  # > 0: downsample clouds before ICP
     normal_radius: float = 0.02
     max_correspondence: float = 0.02  # frame to frame, m
     max_iterations: int = 30
@@ -94,6 +217,17 @@ class TrackerConfig:
     max_step_translation: float = 0.05
     max_step_rotation_deg: float = 30.0
     min_points: int = 20
+
+    def check(self) -> None:
+        _check_positive("tracker", self, (
+            "max_points", "normal_radius", "max_correspondence", "max_iterations",
+            "reregister_correspondence", "max_step_translation", "max_step_rotation_deg",
+            "min_points"))
+        for name in ("reregister_fitness", "min_fitness"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise InputError(f"tracker.{name} must be in [0, 1] (a fraction of points), "
+                                 f"got {value}")
 
 
 # The policy's cloud normalisation (x - (0, 0, 0.55)) / 0.4 (rl/agent.py CLOUD_SCALE): the
@@ -119,3 +253,12 @@ class StudentDiagramConfig:
     segmentation: SegmentationConfig = dc.field(default_factory=SegmentationConfig)
     tracker: TrackerConfig = dc.field(default_factory=TrackerConfig)
     observation: StudentObservationConfig = dc.field(default_factory=StudentObservationConfig)
+
+    def check(self) -> None:
+        """InputError naming the first field the student diagram cannot be built with."""
+        self.cameras.check()
+        self.segmentation.check()
+        self.tracker.check()
+        if self.segmentation.mode == "ground_truth" and not self.cameras.camera.label:
+            raise InputError("cameras.camera.label must be true for segmentation.mode "
+                             "ground_truth (it reads the label images)")

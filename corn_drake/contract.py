@@ -52,6 +52,9 @@ FREE_BODY_QUATERNION = slice(0, 4)
 FREE_BODY_POSITION = slice(4, 7)
 FREE_BODY_ANGULAR_VELOCITY = slice(7, 10)
 FREE_BODY_LINEAR_VELOCITY = slice(10, 13)
+# A pose7 (POSE7_DIM: our pose sources, the tracker's estimate): position, then quaternion wxyz.
+POSE7_POSITION = slice(0, 3)
+POSE7_QUATERNION = slice(3, 7)
 
 # --- observation ----------------------------------------------------------------------------
 OBS_KEYS = ("cloud", "hand_state", "robot_state", "previous_action", "goal", "physics",

@@ -16,19 +16,23 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common import RandomDistribution, RandomGenerator
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
-from corn_drake import DIAGRAMS_DIR
-from corn_drake.config import ObjectConfig, TeacherDiagramConfig, load_config
+from corn_drake.config import ObjectConfig, TeacherDiagramConfig
 from corn_drake.errors import InputError
+from corn_drake.run_config import load_env_config
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
+from corn_drake.scene.randomization import apply_physics
 from corn_drake.systems.energy_meter import add_energy_meter
 from corn_drake.systems.ik import ActionToJointTargets
 from corn_drake.systems.impedance_controller import make_impedance_controller
 from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
-from corn_drake.systems.reward import TaskReward, add_task_reward
+from corn_drake.systems.reward import TaskReward, add_task_reward, reset_previous
+from corn_drake.tasks.episode import Episode
 from corn_drake.timing import clock_of
 
 
@@ -47,18 +51,58 @@ class TeacherDiagram:
     config: TeacherDiagramConfig
     cloud_indices: np.ndarray  # which rows of the object's cloud the observation uses
     policy: object = None  # the PolicySystem of an evaluation diagram
+    # (diagram, its default context): what write_episode restores before each episode.
+    _default: tuple = dataclasses.field(default=(None, None), repr=False)
+
+    def write_episode(self, context, episode: Episode, rng: np.random.Generator) -> None:
+        """Writes `episode` into `context`, the root context of `self.diagram` (the teacher
+        diagram, or the student diagram built around these systems): the default context at the
+        policy clock's first boundary, the sampled physics, robot joints and object pose, the
+        per-episode sources, fresh seeds for every RandomSource from `rng`, the IK latch holding
+        the start joints and the reward's previous-step hold at the start state. Call
+        Simulator.Initialize() after."""
+        root = self.diagram
+        if self._default[0] is not root:
+            self._default = (root, root.CreateDefaultContext())
+        scene, spec, phys = self.scene, self.scene.object_spec, episode.physics
+        context.SetTimeStateAndParametersFrom(self._default[1])
+        context.SetTime(clock_of(self.config.scene.physics).boundary(0))
+        apply_physics(scene, phys, context, 1.0)  # the default context holds the unscaled shapes
+        plant_context = scene.plant.GetMyMutableContextFromRoot(context)
+        scene.plant.SetPositions(plant_context, scene.panda, episode.initial_joints)
+        start = episode.initial_object_pose
+        scene.plant.SetFreeBodyPose(plant_context, scene.object_body, RigidTransform(
+            Quaternion(start[3:] / np.linalg.norm(start[3:])), start[:3]))
+        s = phys.scale
+        for name, value in (("goal_pose", episode.goal_pose),
+                            ("physics_params", phys.as_observation()),
+                            ("object_cloud", s * spec.cloud[self.cloud_indices, :3].reshape(-1)),
+                            ("object_keypoints", s * spec.bbox_corners.reshape(-1)),
+                            ("object_radius", [s * spec.radius]),
+                            ("torque_noise_std", [phys.torque_noise_std])):
+            source = self.sources[name]
+            source.get_mutable_source_value(source.GetMyMutableContextFromRoot(context)).set_value(
+                np.asarray(value, float))
+        # After the episode's draws, so a seed gives the same episode with or without noise.
+        reseed_random_sources(root, context, rng)
+        self.ik.hold_position(self.ik.GetMyMutableContextFromRoot(context), episode.initial_joints)
+        reset_previous(self.reward_hold, self.reward, context)
 
 
 def object_spec_from_config(cfg: ObjectConfig, seed: int = 0) -> ObjectSpec:
+    """The one object `cfg` names (a diagram holds one object; EnvFactory picks one per episode
+    from a config naming all train objects of a library)."""
+    if cfg.cycles_library:
+        raise InputError(f"scene.object names every train object of library {cfg.library} "
+                         "(library_objects: train): a diagram holds one; set library_objects: "
+                         "one and an object_id")
     if cfg.kind == "box":
         return box_spec(cfg.size, cfg.mass, seed=seed)
     if cfg.kind == "cylinder":
         return cylinder_spec(cfg.radius, cfg.length, cfg.mass, seed=seed)
-    if cfg.kind == "library":
-        from corn_drake.assets.library import load_object_spec
+    from corn_drake.assets.library import load_object_spec
 
-        return load_object_spec(cfg.library, cfg.object_id)
-    raise InputError(f"scene.object.kind must be box, cylinder or library, got {cfg.kind!r}")
+    return load_object_spec(cfg.library, cfg.object_id)
 
 
 def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -> int:
@@ -78,7 +122,9 @@ def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -
 
 
 def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:
-    return load_config(path or DIAGRAMS_DIR / "teacher_rollout.yaml", TeacherDiagramConfig)
+    """The teacher diagram's config: the base diagram (diagrams/teacher_rollout.yaml), with the
+    task overlay `path` (a YAML file or a task name, as `--task`) on top."""
+    return load_env_config(path)
 
 
 def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
@@ -159,7 +205,7 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
     """The teacher rollout diagram; the action is the exported input `controller.action`.
 
     With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
-    (the evaluation diagram, diagrams/evaluation.yaml) and there is no action input.
+    (the evaluation diagram, `corn-drake evaluate`) and there is no action input.
     """
     cfg = cfg or load_teacher_config()
     builder = DiagramBuilder()

@@ -5,32 +5,40 @@
         --> StudentObservations (+ RandomSource cloud and goal noise)
 
 Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`;
-outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (7, estimated),
+outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (pose7, estimated),
 `perception.status` (PoseTracker STATUS_FIELDS), `perception.num_points`,
 `perception.object_cloud` (PointCloud of the segmented points).
+
+Config: `load_student_config(path, base)` reads a YAML layer (default: the base diagram
+diagrams/student_rollout.yaml) on top of `base` (default: StudentDiagramConfig()'s defaults).
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 
 import numpy as np
+import yaml
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, RandomSource
 
-from corn_drake import DIAGRAMS_DIR
-from corn_drake.config import load_config
+import corn_drake
+from corn_drake.config import _load_typed
 from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
+                                 POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
 from corn_drake.diagrams import TeacherDiagram, add_teacher_systems
+from corn_drake.errors import InputError, MissingInputError
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.cameras import CameraRig, add_camera_rig, remove_perception_role
 from corn_drake.systems.pose_tracker import PoseTracker
 from corn_drake.systems.segmentation import ObjectSegmentation, robot_link_primitives
-from corn_drake.systems.student_observations import STUDENT_OBS_KEYS, StudentObservations
+from corn_drake.systems.student_observations import StudentObservations
 
 
 @dataclasses.dataclass
@@ -38,7 +46,10 @@ class PerceptionHandles:
     rig: CameraRig
     segmentation: ObjectSegmentation
     tracker: PoseTracker
-    px_per_m: float
+
+    @property
+    def px_per_m(self) -> float:
+        return self.rig.px_per_m
 
 
 @dataclasses.dataclass
@@ -54,21 +65,39 @@ class StudentDiagram:
         return self.teacher.scene
 
 
-def load_student_config(path: str | Path | None = None) -> StudentDiagramConfig:
-    return load_config(path or DIAGRAMS_DIR / "student_rollout.yaml", StudentDiagramConfig)
+def student_base_path() -> Path:
+    """The base student diagram: diagrams/student_rollout.yaml."""
+    return Path(corn_drake.DIAGRAMS_DIR) / "student_rollout.yaml"
 
 
-def pixels_per_metre(cam_cfg, fov_y: float) -> float:
-    """Image rows per metre of surface facing the camera at the mean eye distance."""
-    d = np.mean([np.linalg.norm(np.asarray(e) - np.asarray(cam_cfg.look_at)) for e in cam_cfg.eyes])
-    return float(cam_cfg.height / (2.0 * d * np.tan(fov_y / 2.0)))
+def load_student_config(path: str | Path | None = None,
+                        base: StudentDiagramConfig | None = None) -> StudentDiagramConfig:
+    """The YAML at `path` (default: the base diagram, student_base_path()) read on top of `base`
+    (default: StudentDiagramConfig()), then checked: a layer names only what differs from the
+    config below it. `base` is not modified. A missing file, bad YAML, an unknown key, a wrong
+    type or a value the diagram cannot run with raises an InputError naming the file or field.
+    """
+    path = Path(path) if path is not None else student_base_path()
+    if not path.is_file():
+        raise MissingInputError(f"config file not found: {path}")
+    defaults = copy.deepcopy(base) if base is not None else StudentDiagramConfig()
+    try:
+        # load_config's own loader and error reporting, with yaml_load_typed's defaults= layering.
+        cfg = _load_typed(StudentDiagramConfig, str(path), filename=str(path), defaults=defaults)
+    except yaml.YAMLError as e:
+        # A value Drake could not convert, in a file with Drake's tags (focal: !FovDegrees ...):
+        # the field finder's plain YAML reader cannot read those tags; report Drake's error.
+        cause = e.__context__ or e
+        raise InputError(f"invalid config {path}: {' '.join(str(cause).split())}") from cause
+    cfg.check()
+    return cfg
 
 
 def _pose7_selector() -> np.ndarray:
-    """7 x 13 matrix: free-body state [q_wxyz, p, w, v] -> pose [p, q_wxyz]."""
-    S = np.zeros((7, 13))
-    S[0:3, 4:7] = np.eye(3)
-    S[3:7, 0:4] = np.eye(4)
+    """POSE7_DIM x FREE_BODY_STATE_DIM matrix: a free body's state -> its pose7."""
+    S = np.zeros((POSE7_DIM, FREE_BODY_STATE_DIM))
+    S[POSE7_POSITION, FREE_BODY_POSITION] = np.eye(3)
+    S[POSE7_QUATERNION, FREE_BODY_QUATERNION] = np.eye(4)
     return S
 
 
@@ -83,7 +112,6 @@ def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDi
                    for g in plant.GetVisualGeometriesForBody(plant.get_body(b))]
         remove_perception_role(plant, sg, visuals)
     rig = add_camera_rig(builder, sg, cfg.cameras, scene.object_spec.radius, object_state)
-    px_per_m = pixels_per_metre(cfg.cameras, rig.fov_y)
 
     seg_cfg = cfg.segmentation
     geometric = seg_cfg.mode == "geometric"
@@ -91,7 +119,7 @@ def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDi
         seg_cfg, len(rig.sensors), table_size=scene.config.table_size,
         robot_base=scene.config.robot_base,
         prims=robot_link_primitives(plant, sg, scene.panda) if geometric else None,
-        object_label=int(scene.object_body.index()), px_per_m=px_per_m))
+        object_label=int(scene.object_body.index()), px_per_m=rig.px_per_m))
     for i, port in enumerate(rig.cloud_ports()):
         builder.Connect(port, seg.GetInputPort(f"cloud{i}"))
     if geometric:
@@ -100,11 +128,11 @@ def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDi
         for i, port in enumerate(rig.label_ports()):
             builder.Connect(port, seg.GetInputPort(f"label{i}"))
 
-    physics = cfg.teacher.scene.physics
-    tcfg = cfg.tracker
-    offset = tcfg.offset if tcfg.offset >= 0 else clock_of(physics).perception_offset
+    # One estimate per policy step, between its last plant update and the policy's latch.
+    clock = clock_of(cfg.teacher.scene.physics)
     tracker = builder.AddNamedSystem("pose_tracker", PoseTracker(
-        tcfg, period=tcfg.period, offset=offset, thin=scene.object_spec.thin))
+        cfg.tracker, period=clock.period, offset=clock.perception_offset,
+        thin=scene.object_spec.thin))
     builder.Connect(seg.GetOutputPort("object_cloud"), tracker.GetInputPort("object_cloud"))
     # The tracker starts from the true initial pose (on the robot: the pose the episode is
     # set up at); afterwards it only sees clouds.
@@ -113,12 +141,13 @@ def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDi
     builder.Connect(to_pose7.get_output_port(), tracker.GetInputPort("initial_pose"))
     if goal_pose_port is not None:
         builder.Connect(goal_pose_port, tracker.GetInputPort("goal_pose"))
-    return PerceptionHandles(rig=rig, segmentation=seg, tracker=tracker, px_per_m=px_per_m)
+    return PerceptionHandles(rig=rig, segmentation=seg, tracker=tracker)
 
 
 def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectSpec | None = None,
                           meshcat=None) -> StudentDiagram:
     cfg = cfg or load_student_config()
+    cfg.check()
     builder = DiagramBuilder()
     teacher = add_teacher_systems(builder, cfg.teacher, spec)
     builder.ExportInput(teacher.ik.GetInputPort("action"), "controller.action")

@@ -12,10 +12,12 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.contract import ACTION_DIM
 from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, load_student_config
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.systems.pose_tracker import TrackerState, pose_error
 from corn_drake.systems.segmentation import SegmentationStats
+from corn_drake.timing import clock_of
 
 # An arm pose with the hand above the table's near half: in view of all three cameras.
 ARM_IN_VIEW = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.4, 0.8])
@@ -30,12 +32,17 @@ class PerceptionHarness:
         self.scene = self.student.scene
         self.per = self.student.perception
         self.context = self.diagram.CreateDefaultContext()
-        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(20))
+        self.diagram.GetInputPort("controller.action").FixValue(self.context, np.zeros(ACTION_DIM))
         self.plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
         self.tracker_context = self.per.tracker.GetMyMutableContextFromRoot(self.context)
         self.seg_context = self.per.segmentation.GetMyContextFromRoot(self.context)
         self.object_label = int(self.scene.object_body.index())
         self.set_robot(ARM_IN_VIEW)
+
+    @property
+    def frame_period(self) -> float:
+        """Seconds between two tracker updates: one policy step."""
+        return clock_of(self.cfg.teacher.scene.physics).period
 
     # --- posing ------------------------------------------------------------------------------
     def set_robot(self, q) -> None:
@@ -93,7 +100,7 @@ class PerceptionHarness:
             p.Eval(s.GetMyContextFromRoot(ctx))
         t1 = time.perf_counter()
         for c in per.rig.to_cloud:
-            c.get_output_port().Eval(c.GetMyContextFromRoot(ctx))
+            c.point_cloud_output_port().Eval(c.GetMyContextFromRoot(ctx))
         t2 = time.perf_counter()
         per.segmentation.GetOutputPort("object_cloud").Eval(self.seg_context)
         t3 = time.perf_counter()
@@ -117,10 +124,11 @@ def resting_pose(spec: ObjectSpec, xy, yaw: float, on_side: bool = False) -> Rig
     return RigidTransform(RotationMatrix(RollPitchYaw(0.0, 0.0, yaw)) @ R0, [xy[0], xy[1], z])
 
 
-def scripted_push(spec: ObjectSpec, duration: float = 10.0, period: float = 0.1,
+def slide_and_turn_poses(spec: ObjectSpec, duration: float = 10.0, period: float = 0.1,
                   start=(-0.08, 0.06), shift=(0.15, -0.10), turn: float = 1.2,
                   on_side: bool = False) -> list[RigidTransform]:
-    """Poses of a push that slides the object by `shift` and turns it by `turn` rad.
+    """A kinematic pose sequence (no controller, no physics) of the object resting on the table
+    while it slides by `shift` and turns by `turn` rad, as a push would move it.
 
     Smooth start and stop (smoothstep), so the speed peaks at 1.5x its mean mid-push.
     """

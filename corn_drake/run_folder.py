@@ -133,40 +133,28 @@ def resume_arguments(folder: str | os.PathLike, requested: Mapping[str, Any], *,
     write_json(folder / ARGUMENTS_NAME, dict(requested))
 
 
-def flat_fields(value: Any, prefix: str = "") -> dict[str, Any]:
-    """A nested dict (a config's dataclasses.asdict) as {'a.b.c': leaf}: configs compared
-    field by field."""
-    if not isinstance(value, Mapping):
-        return {prefix: value}
-    out = {}
-    for key, item in value.items():
-        out.update(flat_fields(item, f"{prefix}.{key}" if prefix else str(key)))
-    return out
-
-
 def refuse_changed_config(folder: str | os.PathLike, recorded_path: str | os.PathLike, cfg: Any,
                           **options) -> None:
     """Compares a dataclass config with the one a run recorded (its config.yaml), field by field
-    (options as for `changed_arguments`, keys 'a.b.c'); nothing to compare for a new run.
-
-    The requested config goes through the same YAML dump and load as the recorded one, so only
-    real differences count, not float formatting.
-    """
-    import dataclasses
-
-    from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-
+    (options as for `changed_arguments`, keys 'a.b.c'); nothing to compare for a new run."""
     from corn_drake.config import load_config
 
     recorded_path = Path(recorded_path)
     if not recorded_path.is_file():
         return
-    schema = type(cfg)
     try:
-        recorded = load_config(recorded_path, schema)
+        recorded = load_config(recorded_path, type(cfg))
     except ValueError as e:
         raise InputError(str(e) if isinstance(e, InputError) else
                          f"{recorded_path}: the run's recorded config is unreadable ({e})") from e
-    requested = yaml_load_typed(schema=schema, data=yaml_dump_typed(cfg))
-    refuse_changed_arguments(folder, flat_fields(dataclasses.asdict(recorded)),
-                             flat_fields(dataclasses.asdict(requested)), **options)
+    refuse_config_changes(folder, recorded, cfg, **options)
+
+
+def refuse_config_changes(folder: str | os.PathLike, recorded: Any, requested: Any,
+                          **options) -> None:
+    """InputError listing every field of `requested` that differs from the `recorded` config of
+    `folder` (options as for `changed_arguments`, keys 'a.b.c'). Both go through the YAML dump
+    config.yaml is written with, so only real differences count, not float formatting."""
+    from corn_drake.config import config_fields
+
+    refuse_changed_arguments(folder, config_fields(recorded), config_fields(requested), **options)

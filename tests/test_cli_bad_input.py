@@ -82,12 +82,18 @@ ROWS = [
     _row(f"train --rollout-steps 0 {OUT}", "--rollout-steps"),
     _row(f"train --workers -1 {OUT}", "--workers"),
     _row(f"train --minibatches 0 {OUT}", "--minibatches"),
-    _row(f"train --episode-steps 0 {OUT}", "--episode-steps"),
     _row(f"train --init-log-std nan {OUT}", "--init-log-std"),
     _row(f"train --policy bogus {OUT}", "--policy"),
-    _row(f"train --ppo lrr=1 {OUT}", "--ppo", "lrr"),
-    _row(f"train --config {{root}}/bad_type.yaml {OUT}", "{root}/bad_type.yaml", "task.episode_steps"),
-    _row(f"train --config {{root}}/nowhere.yaml {OUT}", "{root}/nowhere.yaml"),
+    _row(f"train --set ppo.lrr=1 {OUT}", "--set ppo.lrr=1", "ppo.lrr"),
+    _row(f"train --set task.episode_stepz=3 {OUT}", "task.episode_stepz"),
+    _row(f"train --set task.episode_steps=lots {OUT}", "--set task.episode_steps=lots",
+         "env.task.episode_steps"),
+    _row(f"train --set ppo.epochs=1.5 {OUT}", "--set ppo.epochs=1.5", "epochs"),
+    _row(f"train --set seed {OUT}", "--set seed", "KEY=VALUE"),
+    _row(f"train --set seed=[1 {OUT}", "--set seed=[1", "YAML"),
+    _row(f"train --task nosuch_task {OUT}", "--task nosuch_task", "no such task"),
+    _row(f"train --task {{root}}/bad_type.yaml {OUT}", "{root}/bad_type.yaml", "task.episode_steps"),
+    _row(f"train --task {{root}}/nowhere.yaml {OUT}", "{root}/nowhere.yaml"),
     _row(f"train --objects {{root}}/nowhere {OUT}", "{root}/nowhere"),
     # evaluate (items 8, 14)
     _row(f"evaluate --run scripted --episodes 0 {REPORT}", "--episodes"),
@@ -95,8 +101,12 @@ ROWS = [
     _row(f"evaluate --run scripted --seed -1 {REPORT}", "--seed"),
     _row(f"evaluate --run scripted --stochastic {REPORT}", "--stochastic"),
     _row(f"evaluate --run {{root}}/nowhere {REPORT}", "{root}/nowhere/config.yaml"),
-    _row(f"evaluate --run scripted --config {{root}}/bad_type.yaml {REPORT}",
+    _row(f"evaluate --run scripted --task {{root}}/bad_type.yaml {REPORT}",
          "{root}/bad_type.yaml", "task.episode_steps"),
+    _row(f"evaluate --run scripted --task nosuch_task {REPORT}", "--task nosuch_task"),
+    _row(f"evaluate --run scripted --set task.episode_stepz=3 {REPORT}", "task.episode_stepz"),
+    # evaluate runs a policy on an env: training settings are no override of it
+    _row(f"evaluate --run scripted --set ppo.lr=1e-4 {REPORT}", "--set ppo.lr=1e-4", "env"),
     # the tiny library holds clouds only: evaluate needs each object's full scene description
     _row(f"evaluate --run scripted --objects {{root}}/lib --split all {REPORT}",
          "{root}/lib/manifest.json", "unit_inertia"),
@@ -133,7 +143,7 @@ ROWS = [
     _row("demo --out {root}/demo --seed -1", "--seed"),
 ]
 
-ROWS += [_row(f"train --config {{root}}/{name} {OUT}", "{root}/" + name, detail)
+ROWS += [_row(f"train --task {{root}}/{name} {OUT}", "{root}/" + name, detail)
          for name, (_, detail) in BROKEN_CONFIGS.items()]
 
 # Item 12: every command that reads an object library names the broken manifest.

@@ -4,12 +4,21 @@ import numpy as np
 import pytest
 
 from corn_drake.config import TeacherDiagramConfig, load_config, load_config_string
+from corn_drake.errors import InputError
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.objects import ObjectSpec, box_spec
+from corn_drake.tasks.specs import PlanarGoal, PushFromHandGoal
 
 EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
                    "previous_action": (20,), "goal": (9,), "physics": (5,),
                    "object_keypoints": (24,)}
+
+
+def _task(name: str) -> TeacherDiagramConfig:
+    """The base diagram with the task overlay diagrams/tasks/NAME.yaml on top."""
+    from corn_drake.run_config import load_env_config
+
+    return load_env_config(name)
 
 
 @pytest.fixture(scope="module")
@@ -23,11 +32,11 @@ def test_observation_keys_shapes_and_contents(env):
     assert all(np.isfinite(v).all() for v in obs.values())
     assert env.observation_space.contains(obs)
     # The cloud is the object's surface sample at its current pose: centred on the object.
-    p0 = env.episode_info["initial_object_pose"][:3]
+    p0 = env.episode.initial_object_pose[:3]
     assert np.linalg.norm(obs["cloud"].mean(0) - p0) < 0.02
     # Goal is relative: goal position minus object position.
-    np.testing.assert_allclose(obs["goal"][:3], env.episode_info["goal_pose"][:3] - p0, atol=1e-5)
-    np.testing.assert_allclose(obs["physics"], env.episode_info["physics"].as_observation(), rtol=1e-6)
+    np.testing.assert_allclose(obs["goal"][:3], env.episode.goal_pose[:3] - p0, atol=1e-5)
+    np.testing.assert_allclose(obs["physics"], env.episode.physics.as_observation(), rtol=1e-6)
     assert np.all(obs["previous_action"] == 0)
     # Keypoints are the object's box corners at its pose: their centre is the object's origin.
     np.testing.assert_allclose(obs["object_keypoints"].reshape(8, 3).mean(0), p0, atol=1e-5)
@@ -45,8 +54,8 @@ def test_reset_rerandomizes_without_rebuilding(env):
     samples = []
     for seed in (1, 2):
         env.reset(seed=seed)
-        samples.append((env.episode_info["physics"], env.episode_info["initial_object_pose"],
-                        env.episode_info["goal_pose"]))
+        samples.append((env.episode.physics, env.episode.initial_object_pose,
+                        env.episode.goal_pose))
     assert env.diagram is diagram
     (a, pa, ga), (b, pb, gb) = samples
     assert a.mass != b.mass and a.table_friction != b.table_friction
@@ -56,7 +65,7 @@ def test_reset_rerandomizes_without_rebuilding(env):
         assert 1.0 <= phys.finger_friction <= 1.5 and 0.7 <= phys.object_friction <= 1.0
     # Same seed, same episode.
     env.reset(seed=1)
-    np.testing.assert_allclose(env.episode_info["initial_object_pose"], pa)
+    np.testing.assert_allclose(env.episode.initial_object_pose, pa)
     # The goal is at least 5.5 cm from the start and the mass is in the plant context.
     assert np.linalg.norm(pa[:2] - ga[:2]) >= 0.055
     ctx = env.scene.plant.GetMyContextFromRoot(env.context)
@@ -113,15 +122,14 @@ def test_missing_mesh_path_is_named(tmp_path):
 
 
 def test_planar_goals_keep_the_resting_face_and_distance():
-    from corn_drake.diagrams import load_teacher_config
-    from corn_drake import DIAGRAMS_DIR
     from corn_drake.transforms import quat_wxyz_to_matrix
 
-    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark.yaml")
+    cfg = _task("planar")
+    assert isinstance(cfg.task.goal, PlanarGoal) and cfg.task.name == "planar"
     env = TeacherEnv(cfg)
     for seed in range(5):
         env.reset(seed=seed)
-        start, goal = env.episode_info["initial_object_pose"], env.episode_info["goal_pose"]
+        start, goal = env.episode.initial_object_pose, env.episode.goal_pose
         distance = np.linalg.norm(goal[:2] - start[:2])
         assert 0.1 - 1e-9 <= distance <= 0.2 + 1e-9
         assert goal[2] == pytest.approx(start[2])
@@ -140,7 +148,7 @@ def test_object_scale_is_randomized_through_the_context():
     sizes = []
     for seed in range(3):
         obs, _ = env.reset(seed=seed)
-        scale = env.episode_info["physics"].scale
+        scale = env.episode.physics.scale
         assert 0.05 <= scale * env.scene.object_spec.radius <= 0.10
         sg = env.scene.scene_graph
         inspector = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(env.context)).inspector()
@@ -148,7 +156,7 @@ def test_object_scale_is_randomized_through_the_context():
         np.testing.assert_allclose(size, scale * base, rtol=1e-9)
         sizes.append(size[0])
         # The scaled object rests where its scaled stable pose puts it, and the cloud matches.
-        z0 = env.episode_info["initial_object_pose"][2]
+        z0 = env.episode.initial_object_pose[2]
         for _ in range(5):
             obs, *_ = env.step(np.zeros(20))
         z1 = env.scene.plant.EvalBodyPoseInWorld(env.plant_context, env.scene.object_body).translation()[2]
@@ -158,55 +166,48 @@ def test_object_scale_is_randomized_through_the_context():
     assert len(set(np.round(sizes, 6))) == 3
 
 
-def test_near_start_benchmark_puts_the_tool_just_above_the_table_beside_the_object():
-    from corn_drake import DIAGRAMS_DIR
-    from corn_drake.diagrams import load_teacher_config
+def test_near_start_task_puts_the_tool_just_above_the_table_beside_the_object():
     from corn_drake.scene.objects import TABLE_TOP_Z
 
-    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_near.yaml")
+    cfg = _task("planar_near")
     env = TeacherEnv(cfg)
     tool = env.scene.plant.GetFrameByName("panda_tool")
     for seed in range(6):
         env.reset(seed=seed)
         X = tool.CalcPoseInWorld(env.plant_context)
-        p_obj = env.episode_info["initial_object_pose"][:3]
+        p_obj = env.episode.initial_object_pose[:3]
         # Clear of the table but low enough to push without a long approach, pointing down.
         assert TABLE_TOP_Z + 0.03 <= X.translation()[2] <= TABLE_TOP_Z + 0.12
         assert X.rotation().matrix()[2, 2] < -0.95
         assert np.linalg.norm(X.translation()[:2] - p_obj[:2]) >= 0.08 - 1e-9
 
 
-def test_push_benchmark_puts_the_goal_beyond_the_object_as_seen_from_the_hand():
-    from corn_drake import DIAGRAMS_DIR
-    from corn_drake.diagrams import load_teacher_config
-
-    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_push.yaml")
-    t = cfg.task
+def test_push_task_puts_the_goal_beyond_the_object_as_seen_from_the_hand():
+    cfg = _task("push")
+    t, g = cfg.task, cfg.task.goal
+    assert isinstance(g, PushFromHandGoal) and not t.check_orientation
     env = TeacherEnv(cfg)
     tool = env.scene.plant.GetFrameByName("panda_tool")
     for seed in range(8):
         _, info = env.reset(seed=seed)
         hand = tool.CalcPoseInWorld(env.plant_context).translation()[:2]
-        p_obj = env.episode_info["initial_object_pose"][:2]
-        p_goal = env.episode_info["goal_pose"][:2]
+        p_obj = env.episode.initial_object_pose[:2]
+        p_goal = env.episode.goal_pose[:2]
         away, push = p_obj - hand, p_goal - p_obj
         distance = np.linalg.norm(away)
-        assert t.object_min_distance_to_hand - 1e-9 <= distance <= t.object_max_distance_to_hand + 1e-9
-        assert t.planar_distance[0] - 1e-9 <= np.linalg.norm(push) <= t.planar_distance[1] + 1e-9
+        assert g.object_distance_to_hand[0] - 1e-9 <= distance <= g.object_distance_to_hand[1] + 1e-9
+        assert g.distance[0] - 1e-9 <= np.linalg.norm(push) <= g.distance[1] + 1e-9
         angle = np.arccos(away @ push / np.linalg.norm(away) / np.linalg.norm(push))
-        assert angle <= t.planar_heading_spread + 1e-9
+        assert angle <= g.heading_spread + 1e-9
         assert t.goal_x[0] <= p_goal[0] <= t.goal_x[1] and t.goal_y[0] <= p_goal[1] <= t.goal_y[1]
         assert info["status"]["orientation_error"] < 1e-6  # the goal keeps the start yaw
 
 
-def test_push_benchmark_names_the_ranges_when_no_goal_fits():
-    from corn_drake import DIAGRAMS_DIR
-    from corn_drake.diagrams import load_teacher_config
-
-    cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark_push.yaml")
+def test_reset_names_the_task_and_ranges_when_no_goal_fits():
+    cfg = _task("push")
     cfg.task.goal_x, cfg.task.goal_y = [0.5, 0.6], [0.5, 0.6]  # off the table: never reachable
     env = TeacherEnv(cfg)
-    with pytest.raises(ValueError, match="goal_x"):
+    with pytest.raises(InputError, match=r"task 'push'.*task\.goal_x \[0\.5, 0\.6\]"):
         env.reset(seed=0)
 
 

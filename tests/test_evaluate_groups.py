@@ -5,7 +5,7 @@ import json
 import pytest
 
 from corn_drake.assets.library import object_groups
-from corn_drake.commands.evaluate import success_by_group
+from corn_drake.evaluation import success_by_group
 from corn_drake.errors import InputError
 from tests.fixtures import write_tiny_library
 
@@ -42,7 +42,6 @@ def test_groups_come_from_the_manifest(tmp_path):
 
 
 def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
-    from corn_drake import DIAGRAMS_DIR
     from corn_drake.assets.library import build_procedural
     from corn_drake.assets.process import ProcessConfig
     from corn_drake.cli import main
@@ -53,7 +52,7 @@ def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
     build_procedural(lib, 3, seed=0, cfg=cfg, progress=False)  # block, book, bottle (unseen)
     report = tmp_path / "eval.json"
     assert main(["evaluate", "--run", "still", "--objects", str(lib), "--split", "all",
-                 "--config", str(DIAGRAMS_DIR / "reduced_benchmark_push.yaml"),
+                 "--task", "push",
                  "--episodes", "3", "--record", "0", "--report", str(report)]) == 0
     data = json.loads(report.read_text())
     assert data["success_by_group"] == {
@@ -61,3 +60,5 @@ def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
         "train": {"success_rate": 0.0, "episodes": 2, "objects": 2}}
     for key in ("success_rate", "balanced_success_rate", "per_object", "episodes"):
         assert key in data  # the report keeps its keys
+    # ...and says which task and action step it was run on.
+    assert (data["task"], data["action_step"]) == ("push", 0.03)

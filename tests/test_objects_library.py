@@ -96,5 +96,5 @@ def test_teacher_env_runs_a_library_object(library):
         obs, reward, *_ = env.step(np.zeros(20))
     assert np.isfinite(reward) and obs["cloud"].shape == (512, 3)
     # The env starts the object in one of its stable poses (any yaw).
-    start = env.episode_info["initial_object_pose"]
+    start = env.episode.initial_object_pose
     assert any(abs(start[2] - p[2]) < 1e-9 for p in env.scene.object_spec.stable_poses)

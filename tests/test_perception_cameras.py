@@ -12,12 +12,14 @@ ok, reason = rendering_available()
 pytestmark = pytest.mark.skipif(not ok, reason=reason)
 
 
-def _harness(**cam):
+def _harness(mode="fixed", **camera):
+    """A harness whose rig is in `mode`, with Drake CameraConfig fields set from `camera`."""
     from corn_drake.perception_harness import PerceptionHarness
 
     cfg = StudentDiagramConfig()
-    for k, v in cam.items():
-        setattr(cfg.cameras, k, v)
+    cfg.cameras.mode = mode
+    for k, v in camera.items():
+        setattr(cfg.cameras.camera, k, v)
     return PerceptionHarness(cfg)
 
 

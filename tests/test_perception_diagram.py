@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
+from corn_drake.contract import ACTION_DIM
 from corn_drake.diagrams_student import build_student_diagram, load_student_config
 from corn_drake.systems.cameras import rendering_available
 from corn_drake.systems.pose_tracker import pose7_to_matrix
@@ -117,3 +118,39 @@ def test_negative_noise_std_is_named():
 
     with pytest.raises(InputError, match="goal_noise_std"):
         build_student_diagram(cfg)
+
+
+def test_tracker_updates_once_per_policy_step_at_the_clocks_perception_offset():
+    """The tracker has no timing settings of its own: it follows the physics config's clock
+    (here a 0.05 s policy period, 4 physics steps), a quarter step after each boundary."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import EventStatus
+
+    from corn_drake.timing import clock_of
+
+    cfg = load_student_config()
+    cfg.teacher.scene.physics.policy_period = 0.05
+    clock = clock_of(cfg.teacher.scene.physics)
+    sd = build_student_diagram(cfg)
+    tracker = sd.perception.tracker
+    sim = Simulator(sd.diagram)
+    ctx = sim.get_mutable_context()
+    sd.diagram.GetInputPort("controller.action").FixValue(ctx, np.zeros(ACTION_DIM))
+    tctx = tracker.GetMyContextFromRoot(ctx)
+    updates, last, step_start = [], [None], [0.0]
+
+    def monitor(root):
+        # The monitor runs at the end of each step; a timed update at t is applied at the start
+        # of the step that begins at t, so a new state dates from the step's start.
+        state = tracker.tracker_state(tctx)
+        if state is not last[0]:  # every update stores a new TrackerState
+            updates.append(step_start[0])
+            last[0] = state
+        step_start[0] = root.get_time()
+        return EventStatus.Succeeded()
+
+    sim.set_monitor(monitor)
+    sim.Initialize()
+    sim.AdvanceTo(0.2)
+    expected = [0.0] + [clock.perception_offset + n * clock.period for n in range(4)]
+    np.testing.assert_allclose(updates, expected, atol=1e-12)

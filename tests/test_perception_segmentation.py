@@ -94,7 +94,7 @@ def test_d435_resolution_works_after_voxel_thinning():
     from corn_drake.perception_harness import PerceptionHarness
 
     cfg = StudentDiagramConfig()
-    cfg.cameras.width, cfg.cameras.height = 640, 480
+    cfg.cameras.camera.width, cfg.cameras.camera.height = 640, 480
     h = PerceptionHarness(cfg)
     h.set_object(SCENES[0])
     pr = h.precision_recall()

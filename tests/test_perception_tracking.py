@@ -1,4 +1,4 @@
-"""Tracking a scripted push through the whole chain (render -> segment -> ICP), and the
+"""Tracking a slid and turned object through the whole chain (render -> segment -> ICP), and the
 `bench tracking` / `bench perception` reports."""
 
 import json
@@ -12,14 +12,15 @@ ok, reason = rendering_available()
 pytestmark = pytest.mark.skipif(not ok, reason=reason)
 
 
-def test_scripted_push_is_tracked_within_1cm_and_5deg():
-    from corn_drake.perception_harness import PerceptionHarness, scripted_push, track_sequence
+def test_a_slid_and_turned_object_is_tracked_within_1cm_and_5deg():
+    from corn_drake.perception_harness import (PerceptionHarness, slide_and_turn_poses,
+                                               track_sequence)
     from corn_drake.scene.objects import box_spec
 
     spec = box_spec([0.12, 0.06, 0.03], 0.3)
     h = PerceptionHarness(spec=spec)
     # A quicker push than the benchmark's (same path in 4 s): larger steps per frame.
-    r = track_sequence(h, scripted_push(spec, duration=4.0))
+    r = track_sequence(h, slide_and_turn_poses(spec, duration=4.0))
     assert np.median(r["translation_error_m"]) <= 0.01
     assert np.median(r["rotation_error_deg"]) <= 5.0
     assert r["translation_error_m"].max() < 0.02 and r["ok"].all()

@@ -1,8 +1,11 @@
 """The PolicySystem closing the loop in the evaluation diagram acts as the training path does."""
 
 import numpy as np
+import pytest
 import torch
 
+from corn_drake.contract import ACTION_DIM
+from corn_drake.evaluation import run_episode
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.env import TeacherEnv
 
@@ -23,13 +26,21 @@ def test_policy_system_matches_training_path_and_runs_closed_loop():
         np.testing.assert_allclose(value, obs[key], rtol=1e-6, atol=1e-6, err_msg=key)
     # One policy step of each path lands in the same state.
     train_env.step(agent.act(obs))
-    eval_env._advance()
+    eval_env.step()
     np.testing.assert_allclose(
         eval_env.scene.plant.GetPositionsAndVelocities(eval_env.plant_context),
         train_env.scene.plant.GetPositionsAndVelocities(train_env.plant_context), atol=1e-9)
-    eval_env.cfg.task.episode_steps = 5
-    steps, ret, status, info = eval_env.run_closed_loop()
-    assert 1 <= steps <= 5 and np.isfinite(ret) and "success" in status
+    with pytest.raises(ValueError, match="inside the diagram"):
+        eval_env.step(np.zeros(ACTION_DIM))  # the diagram's policy acts, not the caller
+    # Whole episodes on both paths: the same seed gives the same episode.
+    eval_env.cfg.task.episode_steps = train_env.cfg.task.episode_steps = 5
+    closed = run_episode(eval_env, seed=2)
+    stepped = run_episode(train_env, agent, seed=2)
+    assert closed.steps == stepped.steps and 1 <= closed.steps <= 5
+    assert closed.total_reward == pytest.approx(stepped.total_reward, abs=1e-6)
+    assert np.isfinite(closed.total_reward) and "success" in closed.status
+    with pytest.raises(ValueError, match="policy"):
+        run_episode(eval_env, agent)  # two policies for one env
 
 
 def test_sampled_actions_follow_the_policy_distribution_and_its_seed():

@@ -46,6 +46,20 @@ def test_success_and_errors_at_and_near_the_goal():
     assert r.GetOutputPort("task_status").Eval(out)[1] == 1.0
 
 
+
+def test_success_ignores_the_orientation_only_when_the_task_says_so():
+    goal = np.concatenate([[0.1, 0.0, 0.45], IDENTITY_Q])
+    turned = _state([0.12, 0.0, 0.45], yaw=2.5)  # within 5 cm, turned far past 0.1 rad
+    checked = TaskReward(TaskConfig(), 8)
+    assert checked.GetOutputPort("task_status").Eval(
+        _context(checked, turned, goal, [0, 0, 0.6], 0.0))[0] == 0.0
+    position_only = TaskReward(TaskConfig(check_orientation=False), 8)
+    status = position_only.GetOutputPort("task_status").Eval(
+        _context(position_only, turned, goal, [0, 0, 0.6], 0.0))
+    assert status[0] == 1.0 and status[3] == pytest.approx(2.5)  # the error is still reported
+    too_far = _context(position_only, _state([0.2, 0.0, 0.45]), goal, [0, 0, 0.6], 0.0)
+    assert position_only.GetOutputPort("task_status").Eval(too_far)[0] == 0.0
+
 def test_reward_is_potential_difference_plus_success_bonus_minus_energy():
     cfg = TaskConfig()
     r = TaskReward(cfg, 8)

@@ -14,17 +14,16 @@ from pathlib import Path
 import pytest
 import torch
 
-from corn_drake import DIAGRAMS_DIR
 from corn_drake.cli import main
-from corn_drake.config import TeacherDiagramConfig, TrainConfig, load_config
 from corn_drake.errors import InputError
+from corn_drake.run_config import load_run_config
 from corn_drake.run_folder import LOCK_NAME, lock_folder
 from tests.fixtures import write_tiny_library
 from tests.paths import REPO_ROOT
 
 # A one-update state run: 2 envs x 16 steps, 10-step episodes.
 TRAIN = ["train", "--policy", "state", "--envs-per-worker", "2", "--rollout-steps", "16",
-         "--episode-steps", "10", "--no-progress"]
+         "--set", "task.episode_steps=10", "--no-progress"]
 # Subprocesses must import this checkout's corn_drake, whatever the installed one is.
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
 
@@ -50,16 +49,8 @@ def state_run(tmp_path_factory):
     return run
 
 
-@pytest.fixture
-def short_eval_config(tmp_path):
-    """The evaluation diagram with 5-step episodes (a test needs the loop, not the skill)."""
-    from pydrake.common.yaml import yaml_dump_typed
-
-    cfg = load_config(DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
-    cfg.task.episode_steps = 5
-    path = tmp_path / "eval_short.yaml"
-    path.write_text(yaml_dump_typed(cfg))
-    return path
+# Evaluation on the run's env with 5-step episodes (a test needs the loop, not the skill).
+SHORT_EPISODES = ["--set", "task.episode_steps=5"]
 
 
 # --- issue 18 item 1: a refused resume leaves the run as it was -------------------------------
@@ -71,20 +62,31 @@ def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_st
     capsys.readouterr()
     assert main([*TRAIN, "--policy", "e2e", "--steps", "32", "--out", str(run)]) == 2
     _one_error_line(capsys, str(run), "--policy: recorded 'state', requested 'e2e'")
-    assert main([*TRAIN, "--seed", "3", "--ppo", "lr=1e-5", "--steps", "32", "--out", str(run)]) == 2
-    _one_error_line(capsys, "--seed: recorded 0, requested 3", "--ppo lr")
+    assert main([*TRAIN, "--seed", "3", "--set", "ppo.lr=1e-5", "--steps", "32",
+                 "--out", str(run)]) == 2
+    _one_error_line(capsys, "--seed: recorded 0, requested 3", "--set ppo.lr: recorded 0.0003")
     assert main([*TRAIN, "--steps", "16", "--out", str(run)]) == 2  # fewer steps than done
     _one_error_line(capsys, "--steps: recorded 32, requested 16")
+    assert main(["train", "--set", "task.episode_steps=11", "--out", str(run)]) == 2
+    _one_error_line(capsys, "--task or --set task.episode_steps: recorded 10, requested 11")
     assert _files(run) == before  # config.yaml, checkpoint, metrics: all untouched
-    # --steps may grow: the run resumes and its config records the new total.
-    assert main([*TRAIN, "--steps", "64", "--out", str(run)]) == 0
-    assert load_config(run / "config.yaml", TrainConfig).total_steps == 64
+    # --steps may grow, and the recorded config is the rest: the run resumes from it with no
+    # other argument, says what changed, and its config records the new total.
+    capsys.readouterr()
+    assert main(["train", "--steps", "64", "--out", str(run), "--no-progress"]) == 0
+    assert f"resume {run}: total_steps 32 -> 64\n" in capsys.readouterr().out
+    resumed = load_run_config(run)
+    assert resumed.total_steps == 64 and resumed.env.task.episode_steps == 10
+    assert resumed.envs_per_worker == 2 and resumed.rollout_steps == 16
     assert json.loads((run / "metrics.json").read_text())["global_step"] == 64
+    # Repeating the original arguments is no change either.
+    assert main([*TRAIN, "--steps", "64", "--out", str(run)]) == 0
+    assert f"resume {run}: as recorded\n" in capsys.readouterr().out
 
 
 # --- item 11: a corrupt latest checkpoint falls back to the previous one ----------------------
 def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
-        state_run, tmp_path, capsys, short_eval_config):
+        state_run, tmp_path, capsys):
     from corn_drake.rl.trainer import Trainer
 
     run = tmp_path / "run"
@@ -95,13 +97,13 @@ def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
     capsys.readouterr()
     with open(last, "r+b") as f:  # `truncate -s 1000 last.pt`
         f.truncate(1000)
-    resumed = Trainer(load_config(run / "config.yaml", TrainConfig), run)
+    resumed = Trainer(load_run_config(run), run)
     assert resumed.global_step == 32
     err = capsys.readouterr().err
     assert "warning" in err and str(last) in err and str(prev) in err
     report = tmp_path / "ev.json"
     assert main(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
-                 "--config", str(short_eval_config), "--report", str(report)]) == 0
+                 *SHORT_EPISODES, "--report", str(report)]) == 0
     assert "previous checkpoint" in capsys.readouterr().err
     prev.write_bytes(b"not a checkpoint at all")
     before = _files(run)
@@ -134,12 +136,12 @@ def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_p
 @pytest.mark.parametrize("record", ["0", "1"])
 def test_evaluate_refuses_an_unwritable_destination_before_any_episode(
         tmp_path, capsys, monkeypatch, record):
-    from corn_drake.commands import evaluate
+    from corn_drake import evaluation
 
     def no_episode(*args, **kwargs):
         raise AssertionError("episodes ran before the destination was checked")
 
-    monkeypatch.setattr(evaluate, "evaluate", no_episode)
+    monkeypatch.setattr(evaluation, "evaluate", no_episode)
     capsys.readouterr()
     blocker = tmp_path / "a_file"
     blocker.write_text("")
@@ -252,20 +254,22 @@ def test_objects_refuses_another_seed_and_grows_with_more_objects(tmp_path, caps
 
 
 # --- item 13: a run trained on a whole library evaluates over the library ---------------------
-def test_evaluate_a_library_trained_run_over_the_requested_split(tmp_path, short_eval_config):
+def test_evaluate_a_library_trained_run_over_the_requested_split(tmp_path):
     lib, run = tmp_path / "lib", tmp_path / "run"
     assert main(["objects", "--num", "2", "--drops", "8", "--out", str(lib), "--no-progress"]) == 0
     train_ids = [o["id"] for o in json.loads((lib / "manifest.json").read_text())["objects"]
                  if o["split"] == "train"]
     assert len(train_ids) == 2
     assert main(["train", "--policy", "state", "--objects", str(lib), "--steps", "16",
-                 "--envs-per-worker", "2", "--rollout-steps", "8", "--episode-steps", "5",
+                 "--envs-per-worker", "2", "--rollout-steps", "8", "--set", "task.episode_steps=5",
                  "--out", str(run), "--no-progress"]) == 0
     report = tmp_path / "ev.json"
+    # No config argument: the run's config names its library (library_objects: train).
     assert main(["evaluate", "--run", str(run), "--split", "train", "--episodes", "2",
-                 "--record", "0", "--config", str(short_eval_config), "--report", str(report)]) == 0
+                 "--record", "0", "--report", str(report)]) == 0
     data = json.loads(report.read_text())
     assert sorted(data["per_object"]) == sorted(train_ids)  # round-robin over both objects
+    assert all(e["steps"] <= 5 for e in data["episodes"])  # the run's episode length
 
 
 # --- item 16: a killed driver's local Ray ends with it ----------------------------------------

@@ -75,7 +75,7 @@ def test_env_observes_the_sampled_frictions_and_simulates_their_average():
 
     env = TeacherEnv()
     obs, _ = env.reset(seed=4)
-    phys = env.episode_info["physics"]
+    phys = env.episode.physics
     np.testing.assert_allclose(obs["physics"], phys.as_observation())
     scene = env.scene
     combined = _combined(scene, env.context, scene.object_geometries[0], scene.table_geometries[0])

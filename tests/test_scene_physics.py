@@ -8,8 +8,9 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from corn_drake.config import SceneConfig
+from corn_drake.evaluation import run_episode
 from corn_drake.rl.env import TeacherEnv
-from corn_drake.rl.scripted import ScriptedPush
+from corn_drake.rl.scripted import ScriptedPushAgent
 from corn_drake.scene.builder import build_scene
 from corn_drake.scene.objects import box_spec, cylinder_spec
 from corn_drake.scene.randomization import apply_physics, nominal_sample
@@ -71,19 +72,15 @@ def test_table_friction_set_through_the_context_changes_sliding():
     assert slides[0] > 5 * slides[1]
 
 
-def test_scripted_push_moves_the_box():
+def test_scripted_push_moves_the_box_towards_its_goal():
     env = TeacherEnv()
     env.cfg.randomization.enabled = False
-    obs, _ = env.reset(seed=3)
-    p0 = env.episode_info["initial_object_pose"][:3]
-    push = ScriptedPush.toward_table_centre(env.cfg.controller, p0[:2])
-    for _ in range(60):
-        obs, _, terminated, truncated, info = env.step(push(obs["hand_state"]))
-        assert "sim_error" not in info
-        if terminated or truncated:
-            break
+    result = run_episode(env, ScriptedPushAgent(env.cfg.controller), seed=3, max_steps=60)
+    assert result.sim_error is None
+    p0, goal = env.episode.initial_object_pose[:3], env.episode.goal_pose[:3]
     p1 = env.scene.plant.EvalBodyPoseInWorld(env.plant_context, env.scene.object_body).translation()
-    moved = p1[:2] - p0[:2]
+    moved, to_goal = p1[:2] - p0[:2], goal[:2] - p0[:2]
     assert np.linalg.norm(moved) > 0.05
-    assert moved @ -p0[:2] > 0  # along the push direction, towards the table's centre
+    assert moved @ to_goal / np.linalg.norm(to_goal) > 0.8 * np.linalg.norm(moved)  # along the goal line
+    assert np.linalg.norm(goal[:2] - p1[:2]) < 0.5 * np.linalg.norm(to_goal)
     assert abs(p1[2] - p0[2]) < 0.005  # slid, still resting on the table

@@ -61,7 +61,7 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 @pytest.mark.slow
 def test_killed_training_process_resumes_from_its_checkpoint(tmp_path):
     cmd = [sys.executable, "-m", "corn_drake.cli", "train", "--policy", "state", "--steps", "100000",
-           "--envs-per-worker", "2", "--rollout-steps", "16", "--episode-steps", "20",
+           "--envs-per-worker", "2", "--rollout-steps", "16", "--set", "task.episode_steps=20",
            "--out", str(tmp_path), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ckpt = tmp_path / "checkpoints" / "last.pt"
@@ -141,7 +141,8 @@ def test_frozen_encoder_runs_once_per_observation_batch_and_never_in_the_update(
 
 def _library_config(library, episode_steps):
     cfg = TeacherDiagramConfig()
-    cfg.scene.object.kind, cfg.scene.object.library = "library", str(library)
+    obj = cfg.scene.object
+    obj.kind, obj.library, obj.library_objects = "library", str(library), "train"
     cfg.task.episode_steps = episode_steps
     return cfg
 
@@ -159,7 +160,7 @@ def test_envs_move_through_every_train_object(tmp_path):
     for _ in range(6):  # 3 episodes per env
         result = batch.step(np.zeros((4, 20)))
         episodes += result.episode_stats
-        first_poses += [batch.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+        first_poses += [batch.envs[i].episode.initial_object_pose for i in result.final_obs]
     assert len(episodes) == 12 and {e["object"] for e in episodes} == set(train_ids)
     for _ in range(18):  # into the second round of objects
         batch.step(np.zeros((4, 20)))
@@ -178,7 +179,7 @@ def test_envs_move_through_every_train_object(tmp_path):
     for _ in range(6):
         result = again.step(np.zeros((4, 20)))
         replay += result.episode_stats
-        replay_poses += [again.envs[i].episode_info["initial_object_pose"] for i in result.final_obs]
+        replay_poses += [again.envs[i].episode.initial_object_pose for i in result.final_obs]
     assert [e["object"] for e in replay] == [e["object"] for e in episodes]
     np.testing.assert_allclose(replay_poses, first_poses)
 
@@ -189,7 +190,7 @@ def test_a_fixed_object_id_keeps_one_object(tmp_path):
 
     library = write_loadable_library(tmp_path / "lib", num_train=3)
     cfg = _library_config(library, episode_steps=1)
-    cfg.scene.object.object_id = "cylinder_01"
+    cfg.scene.object.library_objects, cfg.scene.object.object_id = "one", "cylinder_01"
     batch = EnvBatch(EnvFactory(cfg, seed=0), num_envs=2)
     batch.reset()
     envs = list(batch.envs)
@@ -213,7 +214,8 @@ def test_train_cli_writes_episodes_per_object_for_every_train_object(tmp_path):
     def train(steps):
         cmd = [sys.executable, "-m", "corn_drake.cli", "train", "--policy", "state",
                "--objects", str(library), "--steps", str(steps), "--envs-per-worker", "2",
-               "--rollout-steps", "8", "--episode-steps", "3", "--out", str(out), "--no-progress"]
+               "--rollout-steps", "8", "--set", "task.episode_steps=3", "--out", str(out),
+               "--no-progress"]
         subprocess.run(cmd, check=True, capture_output=True)
         return json.loads((out / "metrics.json").read_text())
 

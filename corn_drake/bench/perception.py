@@ -1,10 +1,10 @@
 """`corn-drake bench perception --report FILE.json`: frames/s of the whole perception chain.
 
 One frame = render 3 depth cameras -> 3 world-frame clouds -> segmentation (geometric: crop,
-table, robot links, outliers, DBSCAN) -> one ICP tracker update, on a scripted push of the
-default box with the arm in view, at the configured (default) resolution. The per-stage mean
-times come from evaluating the stages one after the other (Drake caches each output, so each
-stage's time excludes the stages before it). Goal: >= 30 frames/s.
+table, robot links, outliers, DBSCAN) -> one ICP tracker update, on a slide-and-turn pose
+sequence of the default box with the arm in view, at the configured (default) resolution. The
+per-stage mean times come from evaluating the stages one after the other (Drake caches each
+output, so each stage's time excludes the stages before it). Goal: >= 30 frames/s.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stag
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", default=None, help="student diagram YAML")
+    parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
+                        "the defaults like diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--frames", type=positive_int, default=100)
     parser.add_argument("--width", type=positive_int, default=None, help="override camera width")
     parser.add_argument("--height", type=positive_int, default=None, help="override camera height")
@@ -30,11 +31,12 @@ def add_arguments(parser):
 
 
 def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
-    from corn_drake.perception_harness import PerceptionHarness, scripted_push
+    from corn_drake.perception_harness import PerceptionHarness, slide_and_turn_poses
 
     harness = PerceptionHarness(cfg)
     spec = harness.scene.object_spec
-    poses = scripted_push(spec, duration=frames * cfg.tracker.period, period=cfg.tracker.period)
+    period = harness.frame_period
+    poses = slide_and_turn_poses(spec, duration=frames * period, period=period)
     harness.set_object(poses[0])
     harness.reset_tracker()
     harness.track()  # first frame: renderer warm-up and tracker initialization
@@ -53,7 +55,7 @@ def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
         "stage_ms": {k: 1e3 * v for k, v in mean.items()},
         "stage_fraction": {k: v / total for k, v in mean.items()},
         "frames": len(stages),
-        "resolution": [cfg.cameras.width, cfg.cameras.height],
+        "resolution": [cfg.cameras.camera.width, cfg.cameras.camera.height],
         "camera_mode": cfg.cameras.mode,
         "segmentation_mode": cfg.segmentation.mode,
         "segmented_points_mean": float(np.mean(counts)),
@@ -65,14 +67,15 @@ def run(args) -> dict:
     from corn_drake.diagrams_student import load_student_config
 
     cfg = load_student_config(args.config)
+    camera = cfg.cameras.camera
     if args.width:
-        cfg.cameras.width = args.width
+        camera.width = args.width
     if args.height:
-        cfg.cameras.height = args.height
+        camera.height = args.height
     if args.mode:
         cfg.cameras.mode = args.mode
         if args.mode == "tracking" and not (args.width or args.height):
-            cfg.cameras.width = cfg.cameras.height = 32  # the paper's per-camera size
+            camera.width = camera.height = 32  # the paper's per-camera size
     if args.segmentation:
         cfg.segmentation.mode = args.segmentation
     result = measure(cfg, args.frames)

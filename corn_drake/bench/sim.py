@@ -72,7 +72,7 @@ def _record(env, plans):
                 env.simulator.AdvanceTo((k * clock.substeps + j) * h)
                 torques.append(np.array(ctrl.GetOutputPort("actuation").Eval(ctrl_ctx)))
             env.simulator.AdvanceTo(clock.boundary(k + 1))
-        recorded.append((env.episode_info["physics"], x0, np.array(torques),
+        recorded.append((env.episode.physics, x0, np.array(torques),
                          env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()))
     return recorded
 

@@ -1,4 +1,4 @@
-"""`corn-drake bench tracking --report FILE.json`: ICP tracking error on scripted pushes.
+"""`corn-drake bench tracking --report FILE.json`: ICP tracking error on slid and turned objects.
 
 Each object (boxes of different aspect ratios, a thin plate, a cylinder on its side) slides
 0.18 m and turns 1.2 rad in 10 s, posed kinematically (no physics: the errors are the
@@ -36,15 +36,16 @@ def objects():
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", default=None, help="student diagram YAML (default: "
-                        "diagrams/student_rollout.yaml)")
+    parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
+                        "the defaults like diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--duration", type=positive_float, default=10.0, help="seconds per push")
     parser.add_argument("--objects", nargs="*", default=None, help="subset of object names")
 
 
 def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = True) -> dict:
     from corn_drake.diagrams_student import load_student_config
-    from corn_drake.perception_harness import PerceptionHarness, scripted_push, track_sequence
+    from corn_drake.perception_harness import (PerceptionHarness, slide_and_turn_poses,
+                                               track_sequence)
 
     cfg = load_student_config(config)
     table = {}
@@ -53,7 +54,8 @@ def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = T
     for name, (spec, on_side, sym) in tqdm(items, desc="tracking", disable=not progress):
         t0 = time.perf_counter()
         harness = PerceptionHarness(cfg, spec)
-        poses = scripted_push(spec, duration=duration, period=cfg.tracker.period, on_side=on_side)
+        poses = slide_and_turn_poses(spec, duration=duration, period=harness.frame_period,
+                                     on_side=on_side)
         r = track_sequence(harness, poses, symmetry_axis=sym)
         te, re = r["translation_error_m"], r["rotation_error_deg"]
         all_t.append(te)
@@ -85,7 +87,7 @@ def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = T
                                    and v["median_rotation_error_deg"] <= 5.0
                                    for v in table.values())),
         "duration_s": duration,
-        "cameras": f"{cfg.cameras.mode} {cfg.cameras.width}x{cfg.cameras.height}",
+        "cameras": f"{cfg.cameras.mode} {cfg.cameras.camera.width}x{cfg.cameras.camera.height}",
         "segmentation": cfg.segmentation.mode,
         "per_object": table,
     }

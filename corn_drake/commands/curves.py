@@ -1,7 +1,8 @@
 """`corn-drake curves`: one learning-curve PNG over several training runs (e.g. corn vs state).
 
 Each run's history comes from its checkpoint (present while the run is still going or was
-killed) or, failing that, its metrics.json. Runs are labelled by their policy.
+killed) or, failing that, its metrics.json. Runs are labelled by their policy and task, from
+the run's config.yaml.
 """
 
 from __future__ import annotations
@@ -37,12 +38,12 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
             raise InputError(f"{metrics} has no 'history' list (written before curves were kept?)")
     else:
         raise MissingInputError(f"{run_dir}: no checkpoints/last.pt or metrics.json; is it a training run?")
-    config = run_dir / "config.yaml"
-    label = run_dir.name
-    if config.is_file():
-        from corn_drake.config import TrainConfig, load_config
+    from corn_drake.run_config import load_run_config, run_config_path
 
-        label = f"{load_config(config, TrainConfig).policy} ({run_dir.name})"
+    label = run_dir.name
+    if run_config_path(run_dir).is_file():
+        cfg = load_run_config(run_dir)
+        label = f"{cfg.policy} on {cfg.env.task.name} ({run_dir.name})"
     return label, history
 
 

@@ -2,7 +2,7 @@
 
 1. object library: one procedural object per family (train + unseen families);
 2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
-4. PPO teacher (`corn` policy, frozen encoder) on the reduced benchmark over the train objects;
+4. PPO teacher (`corn` policy, frozen encoder) on the planar task over the train objects;
 5. evaluation in the evaluation diagram on an unseen object, recorded to Meshcat HTML;
 plus a scripted push recording and the simulation-speed report. Every stage writes under --out
 and is skipped when its output is already complete, so a killed demo resumes.
@@ -14,6 +14,9 @@ import time
 from pathlib import Path
 
 from corn_drake.cli_types import nonnegative_int, positive_int
+
+# The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
+TASK = "planar"
 
 NAME = "demo"
 HELP = "run the pipeline end to end at a small default size; prints where each output went"
@@ -35,10 +38,8 @@ def _stage(name: str, outputs: dict, t0: float):
 
 
 def run(args) -> int:
-    from pydrake.common.yaml import yaml_dump_typed
     from pydrake.geometry import Meshcat
 
-    from corn_drake import DIAGRAMS_DIR
     from corn_drake.assets.library import build_procedural
     from corn_drake.assets.process import ProcessConfig
     from corn_drake.bench.report import write_report
@@ -48,10 +49,9 @@ def run(args) -> int:
     from corn_drake.contact.pretrain import Pretrainer
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.diagrams import load_teacher_config
-    from corn_drake.io_utils import write_text
+    from corn_drake.evaluation import run_episode
     from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.rollout import run_episode
-    from corn_drake.rl.scripted import ScriptedPush
+    from corn_drake.rl.scripted import ScriptedPushAgent
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -83,37 +83,27 @@ def run(args) -> int:
 
     _stage("4/6 teacher PPO (corn)", outputs, t0)
     run_dir = out / "teacher_corn"
-    config = out / "teacher_config.yaml"
-    teacher_cfg = load_teacher_config(DIAGRAMS_DIR / "reduced_benchmark.yaml")
-    obj = teacher_cfg.scene.object
-    obj.kind, obj.library, obj.object_id = "library", str(library.resolve()), ""
-    write_text(config, yaml_dump_typed(teacher_cfg))
     # The demo's pretraining is a few hundred steps: its encoder is below the F1 bar by design.
-    cli(["train", "--policy", "corn", "--config", str(config), "--encoder", str(pre / "encoder.pt"),
-         "--allow-weak-encoder",
+    cli(["train", "--policy", "corn", "--task", TASK, "--objects", str(library.resolve()),
+         "--encoder", str(pre / "encoder.pt"), "--allow-weak-encoder",
          "--steps", str(args.train_steps), "--envs-per-worker", "8", "--rollout-steps", "32",
          "--seed", str(args.seed), "--out", str(run_dir), "--no-progress"])
     outputs["teacher run (TensorBoard in tb/)"] = run_dir
+    outputs["run config (what evaluate reads)"] = run_dir / "config.yaml"
     outputs["learning curve"] = run_dir / "plots" / "learning_curve.png"
 
     _stage("5/6 evaluation on unseen objects", outputs, t0)
     report = out / "eval_corn.json"
+    # On the run's own task and action step, read from its config.yaml.
     cli(["evaluate", "--run", str(run_dir), "--objects", str(library), "--split", "unseen",
-         "--episodes", str(args.eval_episodes), "--record", "1", "--config", str(config),
-         "--report", str(report)])
+         "--episodes", str(args.eval_episodes), "--record", "1", "--report", str(report)])
     outputs["evaluation report"] = report
     outputs["evaluation recording (Meshcat HTML)"] = out / "eval_corn_recordings"
 
     _stage("6/6 scripted push + simulation speed", outputs, t0)
     env = TeacherEnv(load_teacher_config(), meshcat=Meshcat())
-    pushes = {}
-
-    def on_reset(_obs):
-        start = env.episode_info["initial_object_pose"][:3]
-        pushes["policy"] = ScriptedPush.toward_table_centre(env.cfg.controller, start[:2])
-
-    result = run_episode(env, lambda obs: pushes["policy"](obs["hand_state"]), seed=3,
-                         max_steps=60, record_path=out / "scripted_push.html", on_reset=on_reset)
+    result = run_episode(env, ScriptedPushAgent(env.cfg.controller), seed=3, max_steps=60,
+                         record_path=out / "scripted_push.html")
     outputs["scripted push recording (Meshcat HTML)"] = result.recording
     bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0,
                                    "policy": None})()

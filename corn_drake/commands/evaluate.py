@@ -1,6 +1,9 @@
 """`corn-drake evaluate`: success of a trained teacher in the evaluation diagram.
 
-The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
+A run is evaluated on exactly the env it was trained on: its config.yaml (task, controller
+action step, episode length, object or library). `--task` and `--set` override it; what they
+change is printed and recorded in the report (`overrides`), with the task's name and the action
+step. The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
 (the run's object, or the --split objects of a library: --objects, else the one the run was
 trained on with `train --objects`); K of them are recorded to Meshcat HTML next to the report.
 The report's folder (and the recordings') are checked writable before the first episode.
@@ -9,10 +12,7 @@ The report's folder (and the recordings') are checked writable before the first 
 from __future__ import annotations
 
 import dataclasses
-from collections import defaultdict
 from pathlib import Path
-
-import numpy as np
 
 from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.errors import InputError
@@ -32,8 +32,14 @@ def add_arguments(parser):
     parser.add_argument("--episodes", type=positive_int, default=10)
     parser.add_argument("--record", type=nonnegative_int, default=1,
                         help="episodes saved as Meshcat HTML")
-    parser.add_argument("--config", default=None,
-                        help="evaluation diagram YAML (default: diagrams/evaluation.yaml)")
+    parser.add_argument("--task", default=None,
+                        help="task overlay (a name in diagrams/tasks/ or a YAML file) instead of "
+                             "the run's task; for --run scripted/still, the task to run "
+                             "(default: the paper's 6D task)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                        help="override an env setting of the run's config, e.g. --set "
+                             "task.episode_steps=50 (repeatable; printed and recorded in the "
+                             "report)")
     parser.add_argument("--seed", type=nonnegative_int, default=1000)
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
@@ -41,9 +47,9 @@ def add_arguments(parser):
 
 
 def _whole_library(obj) -> str:
-    """The library of an object config that names a whole library (object_id ""), as
-    `train --objects` records it; "" for a single object."""
-    return obj.library if obj.kind == "library" and not obj.object_id else ""
+    """The library of an object config that names all its train objects (library_objects:
+    train), as `train --objects` records it; "" for a single object."""
+    return obj.library if obj.cycles_library else ""
 
 
 def _object_specs(args, cfg):
@@ -62,61 +68,14 @@ def _object_specs(args, cfg):
     return [(i, load_object_spec(library, i)) for i in ids]
 
 
-def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path) -> dict:
-    from pydrake.geometry import Meshcat
-
-    from corn_drake.rl.env import TeacherEnv
-
-    meshcat = Meshcat() if record > 0 else None
-    per_object, rows = defaultdict(list), []
-    envs = {}
-    for k in range(episodes):
-        object_id, spec = objects[k % len(objects)]
-        if object_id not in envs:
-            envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat, agent)
-        env = envs[object_id]
-        env.reset(seed=seed + k)
-        recording = None
-        if k < record:
-            env.start_recording()
-        steps, ret, status, info = env.run_closed_loop()
-        if k < record:
-            recording = str(env.save_recording(out_dir / f"episode_{k:03d}_{object_id}.html"))
-        success = bool(status.get("success", 0) > 0)
-        per_object[object_id].append(success)
-        rows.append({"episode": k, "object": object_id, "success": success, "steps": steps,
-                     "return": ret, "position_error": status.get("position_error"),
-                     "orientation_error": status.get("orientation_error"),
-                     "sim_error": info.get("sim_error"), "recording": recording})
-    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
-    return {"success_rate": float(np.mean([r["success"] for r in rows])),
-            "balanced_success_rate": float(np.mean(list(rates.values()))),
-            "per_object": rates,
-            "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
-            "episodes": rows}
-
-
-def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
-    """Group -> {success_rate, episodes, objects} over report rows; `groups` maps object id -> group
-    (assets.library.object_groups), so "unseen" splits into new families and new members."""
-    from corn_drake.errors import InputError
-
-    by_group: dict[str, list[dict]] = defaultdict(list)
-    for row in episodes:
-        if row["object"] not in groups:
-            raise InputError(f"episode {row['episode']}: object {row['object']!r} has no group")
-        by_group[groups[row["object"]]].append(row)
-    return {g: {"success_rate": float(np.mean([r["success"] for r in rows])),
-                "episodes": len(rows), "objects": len({r["object"] for r in rows})}
-            for g, rows in sorted(by_group.items())}
-
-
 def run(args) -> int:
-    from corn_drake.config import TeacherDiagramConfig, load_config
-    from corn_drake import DIAGRAMS_DIR
+    from corn_drake.config import TrainConfig
     from corn_drake.errors import InputError
+    from corn_drake.evaluation import evaluate, success_by_group
     from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
+    from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
+                                       replace_task)
 
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
@@ -126,27 +85,37 @@ def run(args) -> int:
     ensure_writable(report_path.parent, "--report")
     if args.record > 0:
         ensure_writable(out_dir, "--record")
-    cfg = load_config(args.config or DIAGRAMS_DIR / "evaluation.yaml", TeacherDiagramConfig)
     if args.run in REFERENCES:
         if args.stochastic:
             raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                              "deterministic reference controller")
         from corn_drake.rl import scripted
 
-        agent = getattr(scripted, REFERENCES[args.run])(cfg.controller)
+        # A reference has no run: --task chooses its task, --set changes that task.
+        base = TrainConfig(env=load_env_config(args.task))
+        run_cfg = apply_sets(base, args.set, only="env")
+        agent = getattr(scripted, REFERENCES[args.run])(run_cfg.env.controller)
         policy = args.run
     else:
-        train_cfg, agent = load_run(args.run)
-        policy = train_cfg.policy
+        # The run's own config: the task, controller and object(s) it was trained on;
+        # --task and --set are overrides of it.
+        base, agent = load_run(args.run)
+        run_cfg = replace_task(base, args.task) if args.task is not None else base
+        run_cfg = apply_sets(run_cfg, args.set, only="env")
+        policy = base.policy
         if args.stochastic:
             import torch
 
             agent.action_noise = torch.Generator().manual_seed(args.seed)
-        cfg.scene.object = train_cfg.env.scene.object if not args.objects else cfg.scene.object
+    overrides = config_changes(base, run_cfg)
+    cfg = run_cfg.env
+    print(f"evaluate {args.run} on task {cfg.task.name}"
+          + "".join(f"; {change}" for change in overrides))
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
                       out_dir)
-    report.update({"run": str(args.run), "policy": policy, "split": args.split,
-                   "actions": "sampled" if args.stochastic else "mean"})
+    report.update({"run": str(args.run), "policy": policy,
+                   "overrides": [dataclasses.asdict(change) for change in overrides],
+                   "split": args.split, "actions": "sampled" if args.stochastic else "mean"})
     if args.objects:
         from corn_drake.assets.library import object_groups
 

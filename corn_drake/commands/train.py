@@ -1,9 +1,14 @@
 """`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/trainer.py).
 
-OUT is locked while the command runs (a second `train` into it refuses). Training into an
-existing run resumes it, and only with the arguments it was started with (compared with its
-config.yaml, before anything is written): --steps may grow, --ray-address and --no-progress
-may change; any other difference is refused, naming the argument and both values.
+A new run's config is built in layers (corn_drake/run_config.py): the base diagram, the
+`--task` overlay, then the shortcut flags and `--set KEY=VALUE` overrides; the result is
+written into OUT/config.yaml. Training into an existing run resumes it from that file: `--out`
+is all it needs. An argument given on a resume is an override of the recorded config, checked
+before anything is written: --steps may grow, --ray-address (and checkpoint_every) may change;
+any other difference is refused, naming the argument and both values. What an accepted
+override changes is printed.
+
+OUT is locked while the command runs (a second `train` into it refuses).
 """
 
 from __future__ import annotations
@@ -15,116 +20,119 @@ from corn_drake.cli_types import finite_float, nonnegative_int, positive_int
 NAME = "train"
 HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
 
+# The shortcut flags: argparse dest -> the TrainConfig field it sets. They default to None: a
+# new run takes the field's default, a resumed run its recorded value.
+SHORTCUTS = {"policy": "policy", "steps": "total_steps", "workers": "workers",
+             "envs_per_worker": "envs_per_worker", "rollout_steps": "rollout_steps",
+             "minibatches": "ppo.minibatches", "init_log_std": "init_log_std",
+             "encoder": "encoder", "allow_weak_encoder": "allow_weak_encoder", "seed": "seed",
+             "ray_address": "ray_address"}
+# A resumed run may change only these config fields: total_steps may grow (extends the run);
+# ray_address only says where the workers run; checkpoint_every is not an output.
+RESUME_MAY_GROW = ("total_steps",)
+RESUME_MAY_CHANGE = ("ray_address", "checkpoint_every")
+
 
 def add_arguments(parser):
-    parser.add_argument("--policy", choices=("corn", "e2e", "state", "pn"), default="state")
-    parser.add_argument("--objects", default="", help="object library folder (default: the YAML's object)")
-    parser.add_argument("--encoder", default="", help="pretrained encoder checkpoint (corn, pn)")
-    parser.add_argument("--allow-weak-encoder", action="store_true",
+    parser.add_argument("--out", required=True,
+                        help="run folder, e.g. runs/NAME; an existing run resumes from its "
+                             "config.yaml (no other argument needed)")
+    parser.add_argument("--task", default=None,
+                        help="task overlay: a name in diagrams/tasks/ or a YAML file "
+                             "(default: the base diagram, the paper's 6D task)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                        help="override a config field, e.g. --set ppo.lr=1e-4 or --set "
+                             "task.episode_steps=50 (repeatable; KEY a TrainConfig field, the "
+                             "env's sections scene/randomization/controller/task without env.)")
+    parser.add_argument("--policy", choices=("corn", "e2e", "state", "pn"), default=None,
+                        help="default: state")
+    parser.add_argument("--objects", default=None,
+                        help="object library folder: train on all its train objects "
+                             "(default: the task's object)")
+    parser.add_argument("--encoder", default=None, help="pretrained encoder checkpoint (corn, pn)")
+    parser.add_argument("--allow-weak-encoder", action="store_true", default=None,
                         help="accept an --encoder whose pretraining contact F1 is below 0.8 "
                              "(or unrecorded), with a warning")
-    parser.add_argument("--steps", type=positive_int, default=20_000,
-                        help="total environment steps")
-    parser.add_argument("--workers", type=nonnegative_int, default=0,
-                        help="Ray rollout workers (0: in-process)")
-    parser.add_argument("--envs-per-worker", type=positive_int, default=4)
-    parser.add_argument("--rollout-steps", type=positive_int, default=32)
-    parser.add_argument("--minibatches", type=positive_int, default=4,
-                        help="PPO minibatches per epoch")
-    parser.add_argument("--init-log-std", type=finite_float, default=0.0,
-                        help="initial log-std of the Gaussian policy (paper: 0)")
-    parser.add_argument("--ppo", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a PPOConfig field, e.g. --ppo lr=1e-4 (repeatable)")
-    parser.add_argument("--episode-steps", type=positive_int, default=None,
-                        help="override the YAML's step limit")
-    parser.add_argument("--config", default=None, help="teacher diagram YAML")
-    parser.add_argument("--ray-address", default="", help="connect to a Ray cluster instead of a local one")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
+    parser.add_argument("--steps", type=positive_int, default=None,
+                        help="total environment steps (default: 20000)")
+    parser.add_argument("--workers", type=nonnegative_int, default=None,
+                        help="Ray rollout workers (default 0: in-process)")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=None, help="default: 4")
+    parser.add_argument("--rollout-steps", type=positive_int, default=None, help="default: 32")
+    parser.add_argument("--minibatches", type=positive_int, default=None,
+                        help="PPO minibatches per epoch (default: 1, the authors' code)")
+    parser.add_argument("--init-log-std", type=finite_float, default=None,
+                        help="initial log-std of the Gaussian policy (default: the paper's 0)")
+    parser.add_argument("--ray-address", default=None,
+                        help="connect to a Ray cluster instead of a local one")
+    parser.add_argument("--seed", type=nonnegative_int, default=None, help="default: 0")
     parser.add_argument("--no-progress", action="store_true")
 
 
-def run(args) -> int:
-    from corn_drake.diagrams import load_teacher_config
-    from corn_drake.rl.encoders import load_encoder
+def requested_config(args, recorded):
+    """The TrainConfig `args` ask for: on top of the run's `recorded` config (None: a new run,
+    on top of the defaults and the base diagram), the layers in order: --task, the shortcut
+    flags, --set. Repeating a run's original arguments gives its recorded config again."""
     from corn_drake.config import TrainConfig
-    from corn_drake.rl.trainer import Trainer, save_config
-    from corn_drake.run_folder import lock_folder, refuse_changed_config
+    from corn_drake.run_config import apply_sets, load_env_config, replace_task, set_fields
 
-    env_cfg = load_teacher_config(args.config)
-    if args.episode_steps:
-        env_cfg.task.episode_steps = args.episode_steps
-    if args.objects:  # every train object of the library: each env takes a new one every episode
-        env_cfg.scene.object.kind = "library"
-        env_cfg.scene.object.library = args.objects
-        env_cfg.scene.object.object_id = ""
-    if env_cfg.scene.object.kind == "library" and not env_cfg.scene.object.object_id:
-        from corn_drake.rl.vec_env import library_train_ids
+    if recorded is None:
+        cfg = TrainConfig(env=load_env_config(args.task))
+    else:
+        cfg = replace_task(recorded, args.task) if args.task is not None else recorded
+    for dest, field in SHORTCUTS.items():
+        value = getattr(args, dest)
+        if value is not None:
+            cfg = set_fields(cfg, {field: value}, "--" + dest.replace("_", "-"))
+    if args.objects is not None:  # every train object of the library, a new one every episode
+        cfg = set_fields(cfg, {"env.scene.object.kind": "library",
+                               "env.scene.object.library": args.objects,
+                               "env.scene.object.library_objects": "train",
+                               "env.scene.object.object_id": ""}, "--objects")
+    return apply_sets(cfg, args.set)
 
-        library_train_ids(env_cfg.scene.object.library)  # a bad library fails before any write
-    cfg = TrainConfig(policy=args.policy, total_steps=args.steps, workers=args.workers,
-                      envs_per_worker=args.envs_per_worker, rollout_steps=args.rollout_steps,
-                      seed=args.seed, ray_address=args.ray_address, encoder=args.encoder,
-                      init_log_std=args.init_log_std, allow_weak_encoder=args.allow_weak_encoder,
-                      env=env_cfg)
-    cfg.ppo.minibatches = args.minibatches
-    cfg.ppo = ppo_overrides(cfg.ppo, args.ppo)
+
+def run(args) -> int:
+    from corn_drake.rl.encoders import load_encoder
+    from corn_drake.rl.trainer import Trainer
+    from corn_drake.run_config import (config_changes, load_run_config, run_config_path,
+                                       write_run_config)
+    from corn_drake.run_folder import lock_folder, refuse_config_changes
+
     out = Path(args.out)
     with lock_folder(out):
         # Everything that can refuse comes before the first write: a refused resume leaves the
         # run as it was (its config.yaml is what `evaluate` rebuilds the policy from).
-        refuse_changed_config(out, out / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
-                              ignore=RESUME_MAY_CHANGE, name=argument_of_field)
+        recorded = load_run_config(out) if run_config_path(out).is_file() else None
+        cfg = requested_config(args, recorded)
+        if cfg.env.scene.object.cycles_library:
+            from corn_drake.rl.vec_env import library_train_ids
+
+            library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
+        if recorded is not None:
+            refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,
+                                  ignore=RESUME_MAY_CHANGE, name=argument_of_field)
         encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
         trainer = Trainer(cfg, out, encoder)  # reads (and checks) the checkpoint, writes nothing
-        save_config(cfg, out / "config.yaml")
+        write_run_config(cfg, out)
+        if recorded is None:
+            print(f"new run {out}: task {cfg.env.task.name}, policy {cfg.policy}, "
+                  f"{cfg.total_steps} steps")
+        else:
+            changes = config_changes(recorded, cfg)
+            print(f"resume {out}: " + ("; ".join(map(str, changes)) or "as recorded"))
         metrics = trainer.train(progress=not args.no_progress)
     print(f"trained {metrics['global_step']} steps; run folder {out}")
     return 0
 
 
-# A resumed run (OUT holds config.yaml) must be given the arguments it was started with, except
-# these config fields: --steps may grow (extends the run); --ray-address only says where the
-# workers run; checkpoint_every is not an output. --no-progress is not in the config at all.
-RESUME_MAY_GROW = ("total_steps",)
-RESUME_MAY_CHANGE = ("ray_address", "checkpoint_every")
-# The argument that sets each config field, to name it when a resume differs.
-_FIELD_ARGUMENTS = {"policy": "--policy", "total_steps": "--steps", "workers": "--workers",
-                    "envs_per_worker": "--envs-per-worker", "rollout_steps": "--rollout-steps",
-                    "seed": "--seed", "encoder": "--encoder", "init_log_std": "--init-log-std",
-                    "allow_weak_encoder": "--allow-weak-encoder",
-                    "ppo.minibatches": "--minibatches",
-                    "env.task.episode_steps": "--episode-steps (or --config task.episode_steps)"}
-
-
 def argument_of_field(field: str) -> str:
     """The train argument behind a TrainConfig field ('a.b.c'), for refusal messages."""
-    if field in _FIELD_ARGUMENTS:
-        return _FIELD_ARGUMENTS[field]
+    for dest, name in SHORTCUTS.items():
+        if name == field:
+            return "--" + dest.replace("_", "-")
     if field.startswith("env.scene.object."):
-        return f"--objects (or --config scene.object.{field.rsplit('.', 1)[1]})"
-    if field.startswith("ppo."):
-        return f"--ppo {field[4:]}"
+        return f"--objects (or --set {field[4:]})"
     if field.startswith("env."):
-        return f"--config ({field[4:]})"
-    return field
-
-
-def ppo_overrides(ppo, items: list[str]):
-    """PPOConfig with `NAME=VALUE` overrides; an unknown name or a bad value is named."""
-    import dataclasses
-
-    from corn_drake.errors import InputError
-
-    fields = {f.name: f for f in dataclasses.fields(ppo)}
-    changes = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or name not in fields:
-            raise InputError(f"--ppo {item!r}: expected NAME=VALUE with NAME one of {sorted(fields)}")
-        kind = type(getattr(ppo, name))
-        try:
-            changes[name] = kind(value)
-        except ValueError:
-            raise InputError(f"--ppo {item!r}: {value!r} is not a {kind.__name__}") from None
-    return dataclasses.replace(ppo, **changes)
+        return f"--task or --set {field[4:]}"
+    return f"--set {field}"

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from corn_drake.config import TrainConfig, load_config
+from corn_drake.config import TrainConfig
 from corn_drake.errors import MissingInputError
 from corn_drake.io_utils import load_checkpoint
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.encoders import load_encoder
+from corn_drake.run_config import load_run_config
 
 
 def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     run_dir = Path(run_dir)
-    cfg = load_config(run_dir / "config.yaml", TrainConfig)
+    cfg = load_run_config(run_dir)
     ckpt = run_dir / "checkpoints" / "last.pt"
     state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
     if state is None:

@@ -1,8 +1,10 @@
-"""A scripted pushing controller: waypoints for the tool, turned into normalised actions.
+"""Reference controllers with the learned policies' interface (`act(obs)`): the scripted
+pusher and the zero action.
 
-Used by the notebooks, tests and demos to exercise the controller without a learned policy:
-go above a point behind the object, descend, then push through the object along a direction,
-with fixed gains and the gripper pointing down.
+ScriptedPushAgent exercises the controller without a learned policy (the demo, notebook 01,
+tests/test_scene_physics.py) and is `corn-drake evaluate --run scripted`: go to a point
+behind the object on its goal line, descend, then push through the goal, with fixed gains and
+the gripper pointing down.
 """
 
 from __future__ import annotations
@@ -10,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from corn_drake.config import ControllerConfig
+from corn_drake.contract import ACTION_DIM, ACTION_SLICES, NUM_KEYPOINTS
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.ik import ACTION_DIM
 from corn_drake.transforms import from_pose9
 
 # Tool frame pointing down (tool z = world -z), fingers spanning world y.
@@ -34,41 +36,14 @@ def _log_so3(R: np.ndarray) -> np.ndarray:
 def action_towards(tool_p: np.ndarray, tool_R: np.ndarray, target_p: np.ndarray,
                    cfg: ControllerConfig, kp: float = 120.0, rho: float = 1.0,
                    target_R: np.ndarray = R_DOWN) -> np.ndarray:
-    """Normalised 20-D action moving the tool towards target_p / target_R with fixed gains."""
-    dp = np.clip((target_p - tool_p) / cfg.max_position_delta, -1, 1)
-    dr = np.clip(_log_so3(target_R @ tool_R.T) / cfg.max_rotation_delta, -1, 1)
-    kp_n = (kp - np.mean(cfg.kp_range)) / (np.ptp(cfg.kp_range) / 2)
-    rho_n = (rho - np.mean(cfg.rho_range)) / (np.ptp(cfg.rho_range) / 2)
-    return np.concatenate([dp, dr, np.full(7, kp_n), np.full(7, rho_n)])
-
-
-class ScriptedPush:
-    """Stateful push: pre-push pose behind the object, descend, push `distance` along `direction`."""
-
-    def __init__(self, cfg: ControllerConfig, object_xy, direction_xy, distance: float = 0.15,
-                 height: float = 0.025, standoff: float = 0.1, tolerance: float = 0.015):
-        d = np.asarray(direction_xy, float)
-        d = d / np.linalg.norm(d)
-        start = np.asarray(object_xy, float) - standoff * d
-        end = np.asarray(object_xy, float) + distance * d
-        z = TABLE_TOP_Z + height
-        self.waypoints = [np.array([*start, z + 0.12]), np.array([*start, z]), np.array([*end, z])]
-        self.cfg, self.tolerance, self.index = cfg, tolerance, 0
-
-    @classmethod
-    def toward_table_centre(cls, cfg: ControllerConfig, object_xy, distance: float = 0.1,
-                            **kwargs) -> "ScriptedPush":
-        """A push towards the table's centre, so the object stays on the table."""
-        object_xy = np.asarray(object_xy, float)
-        direction = -object_xy if np.linalg.norm(object_xy) > 1e-3 else np.array([1.0, 0.0])
-        return cls(cfg, object_xy, direction, distance=distance, **kwargs)
-
-    def __call__(self, hand_state: np.ndarray) -> np.ndarray:
-        p, R = from_pose9(hand_state)
-        if (self.index < len(self.waypoints) - 1
-                and np.linalg.norm(self.waypoints[self.index] - p) < self.tolerance):
-            self.index += 1
-        return action_towards(p, R, self.waypoints[self.index], self.cfg)
+    """Normalised action moving the tool towards target_p / target_R with fixed gains."""
+    action = np.empty(ACTION_DIM)
+    action[ACTION_SLICES["position"]] = np.clip((target_p - tool_p) / cfg.max_position_delta, -1, 1)
+    action[ACTION_SLICES["rotation"]] = np.clip(
+        _log_so3(target_R @ tool_R.T) / cfg.max_rotation_delta, -1, 1)
+    action[ACTION_SLICES["kp"]] = (kp - np.mean(cfg.kp_range)) / (np.ptp(cfg.kp_range) / 2)
+    action[ACTION_SLICES["rho"]] = (rho - np.mean(cfg.rho_range)) / (np.ptp(cfg.rho_range) / 2)
+    return action
 
 
 class ScriptedPushAgent:
@@ -88,7 +63,7 @@ class ScriptedPushAgent:
         self.lateral_tolerance = lateral_tolerance
 
     def act(self, obs: dict) -> np.ndarray:
-        corners = np.asarray(obs["object_keypoints"], float).reshape(8, 3)
+        corners = np.asarray(obs["object_keypoints"], float).reshape(NUM_KEYPOINTS, 3)
         c = corners[:, :2].mean(axis=0)
         radius = float(np.max(np.linalg.norm(corners[:, :2] - c, axis=1)))
         to_goal = np.asarray(obs["goal"], float)[:2]

@@ -18,7 +18,7 @@ import torch
 
 from corn_drake.config import TrainConfig
 from corn_drake.errors import InputError
-from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json, write_text
+from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
@@ -240,9 +240,3 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=100)
-
-
-def save_config(cfg: TrainConfig, path: Path) -> None:
-    from pydrake.common.yaml import yaml_dump_typed
-
-    write_text(path, yaml_dump_typed(cfg))

@@ -10,8 +10,7 @@ from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMate
                               Convex, Cylinder, GeometryId, GeometrySet, ProximityProperties,
                               SceneGraph)
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction, MultibodyPlant,
-                                     MultibodyPlantConfig)
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, RigidBody, SpatialInertia, UnitInertia
 from pydrake.systems.framework import DiagramBuilder
 
@@ -127,11 +126,7 @@ def build_table_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpe
 
     Returns (plant, scene_graph, object body); the plant is finalized.
     """
-    plant_config = MultibodyPlantConfig(
-        time_step=cfg.physics.time_step,
-        discrete_contact_approximation=cfg.physics.discrete_contact_approximation,
-        contact_model=cfg.physics.contact_model, use_sampled_output_ports=False)
-    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    plant, scene_graph = AddMultibodyPlant(cfg.physics.plant, builder)
     _add_table(plant, cfg)
     _, body, _ = _add_object(plant, cfg, spec)
     plant.Finalize()
@@ -140,16 +135,8 @@ def build_table_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpe
 
 def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> Scene:
     """Adds plant + scene graph to `builder`; the plant is finalized on return."""
-    plant_config = MultibodyPlantConfig(
-        time_step=cfg.physics.time_step,
-        discrete_contact_approximation=cfg.physics.discrete_contact_approximation,
-        contact_model=cfg.physics.contact_model,
-        # Unsampled output ports: every system that updates at a policy boundary t_k (IK latch,
-        # reward hold) then sees the plant state at t_k. With sampled ports (Drake's default)
-        # they saw the state one physics step later, because the plant's own update at t_k had
-        # already been computed (tests/test_reward.py checks the hold).
-        use_sampled_output_ports=False)
-    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    # Drake's plant settings as the config holds them (config.py says why its ports are unsampled).
+    plant, scene_graph = AddMultibodyPlant(cfg.physics.plant, builder)
     panda = add_franka(plant, RigidTransform(cfg.robot_base), cfg.physics.armature)
     if not cfg.physics.gravity_on_robot:
         # As in the paper's simulation: the torque law has no gravity term.

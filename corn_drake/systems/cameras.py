@@ -1,6 +1,8 @@
 """Three depth cameras (Drake RgbdSensor + RenderEngineVtk) and their world-frame point clouds.
 
-Two modes (CameraRigConfig.mode):
+Every eye shares one Drake CameraConfig (CameraRigConfig.camera): its MakeCameras() gives the
+color and depth cameras (intrinsics, ClippingRange, DepthRange, renderer name), so size, focal
+and ranges are Drake's own settings. Two modes (CameraRigConfig.mode):
 
 * ``fixed``: each sensor is welded to the world at its eye, looking at ``look_at``.
 * ``tracking`` (the paper's student cameras): each sensor hangs off its own SceneGraph frame
@@ -11,7 +13,8 @@ Two modes (CameraRigConfig.mode):
   plant body, no plant re-finalization: the rig is a geometry source like the plant itself.
   The field of view is fixed at construction (RenderCameraCore intrinsics cannot change), so
   the paper's fov = 2 atan(radius / distance) is evaluated once with the object's radius and
-  each eye's distance to ``look_at``, times ``tracking_fov_margin``.
+  the nearest eye's distance to ``look_at``, times ``tracking_fov_margin``; it replaces the
+  config's focal.
 
 Each sensor's depth image goes through Drake's DepthImageToPointCloud with the sensor's
 world pose, so its cloud is in the world frame; pixels with no return (+inf beyond z_far,
@@ -20,19 +23,20 @@ world pose, so its cloud is in the world frame; pixels with no return (+inf beyo
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
-from pydrake.geometry import (ClippingRange, ColorRenderCamera, DepthRange, DepthRenderCamera,
-                              FramePoseVector, GeometryFrame, MakeRenderEngineVtk,
-                              RenderCameraCore, RenderEngineVtkParams, Role, SceneGraph)
+from pydrake.geometry import (FramePoseVector, GeometryFrame, MakeRenderEngineVtk,
+                              RenderEngineVtkParams, Role, SceneGraph)
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.sensors import CameraInfo, RgbdSensor
+from pydrake.systems.sensors import CameraConfig, CameraInfo, RgbdSensor
 
-RENDERER_NAME = "perception_vtk"
+from corn_drake.contract import FREE_BODY_POSITION, FREE_BODY_STATE_DIM
+from corn_drake.errors import InputError
 
 
 def look_at(eye, target) -> RigidTransform:
@@ -54,24 +58,30 @@ def tracking_fov(radius: float, eyes, target, margin: float) -> float:
     return float(2.0 * np.arctan(margin * radius / d))
 
 
+def pixels_per_metre(eyes, target, info: CameraInfo) -> float:
+    """Image rows per metre of surface facing the camera at the mean eye distance."""
+    d = np.mean([np.linalg.norm(np.asarray(e) - np.asarray(target)) for e in eyes])
+    return float(info.focal_y() / d)
+
+
 class CameraAim(LeafSystem):
     """Poses the camera rig's frames: each camera sits at its eye and looks at the object.
 
-    Input ``object_state`` (13: the free body's [q_wxyz, p, w, v]); output ``frame_poses``
-    (FramePoseVector for SceneGraph's camera_rig source). Stateless, so cloning or resetting a
-    context needs nothing from here.
+    Input ``object_state`` (the object's free-body state, contract.FREE_BODY_STATE_DIM); output
+    ``frame_poses`` (FramePoseVector for SceneGraph's camera_rig source). Stateless, so cloning
+    or resetting a context needs nothing from here.
     """
 
     def __init__(self, frame_ids, eyes):
         super().__init__()
         self._frames = list(frame_ids)
         self._eyes = [np.asarray(e, float) for e in eyes]
-        self.DeclareVectorInputPort("object_state", 13)
+        self.DeclareVectorInputPort("object_state", FREE_BODY_STATE_DIM)
         self.DeclareAbstractOutputPort("frame_poses", lambda: AbstractValue.Make(FramePoseVector()),
                                        self._calc)
 
     def _calc(self, context, output):
-        target = self.get_input_port(0).Eval(context)[4:7]
+        target = self.GetInputPort("object_state").Eval(context)[FREE_BODY_POSITION]
         poses = output.get_mutable_value()
         poses.clear()
         for fid, eye in zip(self._frames, self._eyes):
@@ -83,11 +93,13 @@ class CameraRig:
     sensors: list[RgbdSensor]
     to_cloud: list[DepthImageToPointCloud]
     aim: CameraAim | None
+    camera: CameraConfig  # the one camera every eye renders with (focal set for the mode)
     infos: list[CameraInfo]
-    fov_y: float
+    fov_y: float  # vertical field of view, rad
+    px_per_m: float  # image rows per metre at the mean eye distance (pixels_per_metre)
 
     def cloud_ports(self):
-        return [c.get_output_port() for c in self.to_cloud]
+        return [c.point_cloud_output_port() for c in self.to_cloud]
 
     def label_ports(self):
         return [s.label_image_output_port() for s in self.sensors]
@@ -110,11 +122,41 @@ def back_projection_info(info: CameraInfo) -> CameraInfo:
                       info.center_x() - 0.5, info.center_y() - 0.5)
 
 
-def add_renderer(scene_graph: SceneGraph, name: str = RENDERER_NAME) -> str:
-    """A headless VTK renderer (default EGL backend; Mesa's llvmpipe on CPU-only machines)."""
-    if not scene_graph.HasRenderer(name):
-        scene_graph.AddRenderer(name, MakeRenderEngineVtk(RenderEngineVtkParams()))
+def add_renderer(scene_graph: SceneGraph, camera: CameraConfig) -> str:
+    """The camera's renderer (camera.renderer_name), added to `scene_graph` unless it is there.
+
+    RenderEngineVtk only: its default EGL backend renders headless (Mesa's llvmpipe on CPU-only
+    machines). renderer_class "" or "RenderEngineVtk" means default parameters with the
+    camera's background; a RenderEngineVtkParams is used as given.
+    """
+    name = camera.renderer_name
+    if scene_graph.HasRenderer(name):
+        return name
+    kind = camera.renderer_class
+    if isinstance(kind, RenderEngineVtkParams):
+        params = kind
+    elif kind in ("", "RenderEngineVtk"):
+        params = RenderEngineVtkParams()
+        params.default_clear_color = camera.background.rgba[:3]
+    else:
+        raise InputError(f"cameras.camera.renderer_class: the camera rig renders with "
+                         f"RenderEngineVtk ('', 'RenderEngineVtk' or !RenderEngineVtkParams), "
+                         f"got {kind!r}")
+    scene_graph.AddRenderer(name, MakeRenderEngineVtk(params))
     return name
+
+
+def rig_camera(cfg, object_radius: float) -> CameraConfig:
+    """The CameraConfig every eye of the rig renders with: `cfg.camera`, and in tracking mode
+    with the focal that gives the paper's field of view for this object."""
+    camera = copy.deepcopy(cfg.camera)
+    if cfg.mode == "tracking":
+        fov_y = tracking_fov(object_radius, cfg.eyes, cfg.look_at, cfg.tracking_fov_margin)
+        focal = camera.height / (2.0 * np.tan(fov_y / 2.0))
+        camera.focal = CameraConfig.FocalLength(x=focal, y=focal)
+    elif cfg.mode != "fixed":
+        raise InputError(f"cameras.mode must be 'fixed' or 'tracking', got {cfg.mode!r}")
+    return camera
 
 
 def remove_perception_role(plant, scene_graph: SceneGraph, geometry_ids) -> None:
@@ -124,33 +166,27 @@ def remove_perception_role(plant, scene_graph: SceneGraph, geometry_ids) -> None
 
 def add_camera_rig(builder: DiagramBuilder, scene_graph: SceneGraph, cfg, object_radius: float,
                    object_state_port=None) -> CameraRig:
-    """Adds renderer, three RgbdSensors and their DepthImageToPointCloud converters.
+    """Adds renderer, one RgbdSensor per eye and their DepthImageToPointCloud converters.
 
-    `cfg` is a CameraRigConfig. In tracking mode `object_state_port` (13) drives the aim.
+    `cfg` is a CameraRigConfig (checked by CameraRigConfig.check()). In tracking mode
+    `object_state_port` (the object's free-body state) drives the aim.
     """
-    renderer = add_renderer(scene_graph)
+    camera = rig_camera(cfg, object_radius)
+    add_renderer(scene_graph, camera)
+    color_cam, depth_cam = camera.MakeCameras()
+    info = depth_cam.core().intrinsics()
     eyes = [np.asarray(e, float) for e in cfg.eyes]
-    if cfg.mode == "fixed":
-        fov_y = np.deg2rad(cfg.fov_y_deg)
-    elif cfg.mode == "tracking":
-        fov_y = tracking_fov(object_radius, eyes, cfg.look_at, cfg.tracking_fov_margin)
-    else:
-        raise ValueError(f"cameras.mode must be 'fixed' or 'tracking', got {cfg.mode!r}")
-    info = CameraInfo(width=cfg.width, height=cfg.height, fov_y=fov_y)
-    core = RenderCameraCore(renderer, info, ClippingRange(cfg.z_near, cfg.z_far), RigidTransform())
-    depth_cam = DepthRenderCamera(core, DepthRange(cfg.z_near, cfg.z_far))
-    color_cam = ColorRenderCamera(core, False)
 
     aim = None
     if cfg.mode == "tracking":
         if object_state_port is None:
             raise ValueError("tracking cameras need the object's state port")
         source = scene_graph.RegisterSource("camera_rig")
-        frames = [scene_graph.RegisterFrame(source, GeometryFrame(f"camera{i}"))
+        frames = [scene_graph.RegisterFrame(source, GeometryFrame(f"{camera.name}{i}"))
                   for i in range(len(eyes))]
         aim = builder.AddNamedSystem("camera_aim", CameraAim(frames, eyes))
-        builder.Connect(object_state_port, aim.get_input_port(0))
-        builder.Connect(aim.get_output_port(0), scene_graph.get_source_pose_port(source))
+        builder.Connect(object_state_port, aim.GetInputPort("object_state"))
+        builder.Connect(aim.GetOutputPort("frame_poses"), scene_graph.get_source_pose_port(source))
         parents = [(f, RigidTransform()) for f in frames]
     else:
         world = scene_graph.world_frame_id()
@@ -158,16 +194,18 @@ def add_camera_rig(builder: DiagramBuilder, scene_graph: SceneGraph, cfg, object
 
     sensors, to_cloud = [], []
     for i, (parent, X_PB) in enumerate(parents):
-        sensor = builder.AddNamedSystem(f"camera{i}", RgbdSensor(parent, X_PB, color_cam, depth_cam))
+        sensor = builder.AddNamedSystem(f"{camera.name}{i}",
+                                        RgbdSensor(parent, X_PB, color_cam, depth_cam))
         builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
-        conv = builder.AddNamedSystem(f"camera{i}_to_cloud", DepthImageToPointCloud(
+        conv = builder.AddNamedSystem(f"{camera.name}{i}_to_cloud", DepthImageToPointCloud(
             back_projection_info(info), fields=BaseField.kXYZs))
         builder.Connect(sensor.depth_image_32F_output_port(), conv.depth_image_input_port())
         builder.Connect(sensor.body_pose_in_world_output_port(), conv.camera_pose_input_port())
         sensors.append(sensor)
         to_cloud.append(conv)
-    return CameraRig(sensors=sensors, to_cloud=to_cloud, aim=aim, infos=[info] * len(sensors),
-                     fov_y=float(fov_y))
+    return CameraRig(sensors=sensors, to_cloud=to_cloud, aim=aim, camera=camera,
+                     infos=[info] * len(sensors), fov_y=float(info.fov_y()),
+                     px_per_m=pixels_per_metre(eyes, cfg.look_at, info))
 
 
 _PROBE = """

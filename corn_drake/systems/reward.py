@@ -74,7 +74,8 @@ class TaskReward(LeafSystem):
         p, R = object_pose_from_state(self.get_input_port(0).Eval(context))
         p_goal, R_goal = self._goal(context)
         pos_err, ori_err = pose_errors(p, R, p_goal, R_goal)
-        success = pos_err <= cfg.success_position and ori_err <= cfg.success_orientation
+        oriented = not cfg.check_orientation or ori_err <= cfg.success_orientation
+        success = pos_err <= cfg.success_position and oriented
         out = bool(np.any(p < cfg.workspace_low) or np.any(p >= cfg.workspace_high))
         return np.array([float(success), float(out), pos_err, ori_err])
 

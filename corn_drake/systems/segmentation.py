@@ -7,8 +7,8 @@ Geometric mode (the paper's real-world chain), in order:
   4. drop points inside the robot's link primitives (boxes / cylinders, grown by
      `robot_margin`), posed by forward kinematics of the robot state input;
   5. for dense images (D435-like), voxel thinning to `max_px_per_m`; then radius outlier
-     removal (n neighbours within r, n scaled to the rig's pixel density);
-  6. DBSCAN; the largest cluster is the object.
+     removal (n neighbours within r; outlier_points gives n for the rig's pixel density);
+  6. DBSCAN (dbscan_eps gives eps for that density); the largest cluster is the object.
 Ground-truth mode keeps the pixels whose render label is the object's body (training only).
 
 Outputs: ``object_cloud`` (PointCloud of every kept point, for the tracker), ``points``
@@ -28,7 +28,9 @@ from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import ImageLabel16I
 
-from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant
+from corn_drake.contract import NUM_JOINTS, ROBOT_STATE_DIM
+from corn_drake.errors import InputError
+from corn_drake.scene.franka import make_controller_plant
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,15 +101,21 @@ class RobotLinkPoser:
         return out
 
 
-def auto_outlier_points(cfg, px_per_m: float) -> int:
-    if cfg.outlier_min_points >= 0:
+def outlier_points(cfg, px_per_m: float) -> int:
+    """Radius-outlier neighbour count n for images of `px_per_m` (SegmentationConfig explains
+    outlier_scaling): the paper's count scaled by the ratio of points per surface patch."""
+    if cfg.outlier_scaling == "none":
         return cfg.outlier_min_points
+    if cfg.outlier_scaling != "pixel_density":
+        raise InputError(f"segmentation.outlier_scaling must be pixel_density or none, "
+                         f"got {cfg.outlier_scaling!r}")
     scale = (px_per_m / cfg.outlier_reference_px_per_m) ** 2
-    return max(2, int(round(cfg.outlier_reference_points * scale)))
+    return max(2, int(round(cfg.outlier_min_points * scale)))
 
 
-def auto_dbscan_eps(cfg, px_per_m: float) -> float:
-    return max(cfg.dbscan_eps, 2.5 / px_per_m)
+def dbscan_eps(cfg, px_per_m: float) -> float:
+    """DBSCAN eps: cfg.dbscan_eps, grown to dbscan_min_eps_pixels pixel footprints."""
+    return max(cfg.dbscan_eps, cfg.dbscan_min_eps_pixels / px_per_m)
 
 
 @dataclasses.dataclass
@@ -200,13 +208,15 @@ def _to_point_cloud(p: np.ndarray) -> PointCloud:
 
 class ObjectSegmentation(LeafSystem):
     """Inputs ``cloud{i}`` (PointCloud, world frame, one per camera), ``label{i}``
-    (ImageLabel16I; ground-truth mode), ``robot_state`` (14; geometric mode)."""
+    (ImageLabel16I; ground-truth mode), ``robot_state`` (joint positions and velocities;
+    geometric mode). `px_per_m`: the images' rows per metre at the eye distance
+    (CameraRig.px_per_m), which sets the outlier count and DBSCAN eps."""
 
-    def __init__(self, cfg, num_cameras: int, *, table_size, robot_base=None, prims=None,
-                 object_label: int | None = None, px_per_m: float = 200.0):
+    def __init__(self, cfg, num_cameras: int, *, table_size, px_per_m: float, robot_base=None,
+                 prims=None, object_label: int | None = None):
         super().__init__()
         if cfg.mode not in ("geometric", "ground_truth"):
-            raise ValueError(f"segmentation.mode must be geometric or ground_truth, got {cfg.mode!r}")
+            raise InputError(f"segmentation.mode must be geometric or ground_truth, got {cfg.mode!r}")
         if cfg.mode == "ground_truth" and object_label is None:
             raise ValueError("ground_truth segmentation needs the object's render label")
         self.cfg = cfg
@@ -218,14 +228,14 @@ class ObjectSegmentation(LeafSystem):
         self._poser = RobotLinkPoser(prims, robot_base) if prims else None
         density = min(px_per_m, cfg.max_px_per_m)
         self.voxel = 1.0 / cfg.max_px_per_m if px_per_m > cfg.max_px_per_m else 0.0
-        self.outlier_n = auto_outlier_points(cfg, density)
-        self.eps = auto_dbscan_eps(cfg, density)
+        self.outlier_n = outlier_points(cfg, density)
+        self.eps = dbscan_eps(cfg, density)
         for i in range(num_cameras):
             self.DeclareAbstractInputPort(f"cloud{i}", AbstractValue.Make(PointCloud()))
         if cfg.mode == "ground_truth":
             for i in range(num_cameras):
                 self.DeclareAbstractInputPort(f"label{i}", AbstractValue.Make(ImageLabel16I()))
-        self.DeclareVectorInputPort("robot_state", 2 * NUM_JOINTS)
+        self.DeclareVectorInputPort("robot_state", ROBOT_STATE_DIM)
         self._cloud_port = self.DeclareAbstractOutputPort(
             "object_cloud", lambda: AbstractValue.Make(PointCloud()), self._calc_cloud)
         self.DeclareVectorOutputPort("points", 3 * cfg.num_points, self._calc_points)

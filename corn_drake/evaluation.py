@@ -1,0 +1,130 @@
+"""Whole episodes of a policy: the one episode runner and the evaluation report.
+
+run_episode runs one episode of a TeacherEnv, with the policy inside the diagram (an env built
+with `agent=`: a PolicySystem acts) or stepped through the gymnasium API (an agent with
+act(obs), or a callable obs -> action), optionally recorded to Meshcat HTML. evaluate runs
+episodes round-robin over objects and returns the report `corn-drake evaluate` writes; the
+demo, notebooks and tests use the same two functions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import defaultdict
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from corn_drake.errors import InputError
+
+
+@dataclasses.dataclass
+class EpisodeResult:
+    steps: int
+    total_reward: float
+    status: dict  # the last step's task status (systems/reward.STATUS_FIELDS)
+    sim_error: str | None = None
+    recording: Path | None = None
+
+    @property
+    def success(self) -> bool:
+        return bool(self.status.get("success", 0) > 0)
+
+
+def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | None = None,
+                record_path: str | Path | None = None) -> EpisodeResult:
+    """Resets `env` (a TeacherEnv) and steps it until the episode ends or `max_steps`.
+
+    policy: None when the env's policy is inside its diagram; otherwise an agent with
+    act(obs) or a callable obs -> normalised action. record_path: save the episode as Meshcat
+    HTML there (the env must have been built with a Meshcat).
+    """
+    if env.policy_in_diagram != (policy is None):
+        raise ValueError("run_episode: pass a policy exactly when the env has none inside its "
+                         "diagram (TeacherEnv(..., agent=...) holds one)")
+    act: Callable | None = getattr(policy, "act", policy)
+    if record_path is not None and env.meshcat is None:
+        raise ValueError("run_episode: recording needs an env built with meshcat=Meshcat()")
+    obs, info = env.reset(seed=seed)
+    if record_path is not None:
+        env.meshcat.StartRecording(set_visualizations_while_recording=False)
+    total, steps, status, error = 0.0, 0, info.get("status", {}), None
+    limit = max_steps or env.cfg.task.episode_steps
+    while steps < limit:
+        obs, reward, terminated, truncated, info = env.step(None if act is None else act(obs))
+        total += reward
+        steps += 1
+        status = info.get("status", status)
+        error = info.get("sim_error")
+        if terminated or truncated:
+            break
+    recording = None
+    if record_path is not None:
+        from corn_drake.viz.meshcat import save_recording
+
+        env.meshcat.StopRecording()
+        recording = save_recording(env.meshcat, record_path)
+    return EpisodeResult(steps=steps, total_reward=total, status=status, sim_error=error,
+                         recording=recording)
+
+
+def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
+             in_diagram: bool = True) -> dict:
+    """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
+    in the diagram of `cfg` (a TeacherDiagramConfig); the first `record` are saved as Meshcat
+    HTML in `out_dir`. Episode k is seeded `seed + k`. With in_diagram (the evaluation
+    diagram), a PolicySystem runs the agent inside the diagram; otherwise the env is stepped
+    with agent.act(obs) (or agent(obs)).
+
+    Returns the report: task (cfg.task.name), action_step (cfg.controller.max_position_delta,
+    the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
+    objects), per_object, mean_episode_length and one row per episode.
+    """
+    from corn_drake.rl.env import TeacherEnv
+
+    if not objects:
+        raise InputError("evaluate: no objects to evaluate on")
+    meshcat = None
+    if record > 0:
+        from pydrake.geometry import Meshcat
+
+        meshcat = Meshcat()
+    per_object, rows = defaultdict(list), []
+    envs = {}
+    for k in range(episodes):
+        object_id, spec = objects[k % len(objects)]
+        if object_id not in envs:
+            envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat,
+                                         agent if in_diagram else None)
+        path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
+        result = run_episode(envs[object_id], None if in_diagram else agent, seed=seed + k,
+                             record_path=path)
+        per_object[object_id].append(result.success)
+        rows.append({"episode": k, "object": object_id, "success": result.success,
+                     "steps": result.steps, "return": result.total_reward,
+                     "position_error": result.status.get("position_error"),
+                     "orientation_error": result.status.get("orientation_error"),
+                     "sim_error": result.sim_error,
+                     "recording": None if result.recording is None else str(result.recording)})
+    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
+    return {"task": cfg.task.name,
+            "action_step": cfg.controller.max_position_delta,
+            "success_rate": float(np.mean([r["success"] for r in rows])),
+            "balanced_success_rate": float(np.mean(list(rates.values()))),
+            "per_object": rates,
+            "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
+            "episodes": rows}
+
+
+def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:
+    """Group -> {success_rate, episodes, objects} over report rows; `groups` maps object id -> group
+    (assets.library.object_groups), so "unseen" splits into new families and new members."""
+    by_group: dict[str, list[dict]] = defaultdict(list)
+    for row in episodes:
+        if row["object"] not in groups:
+            raise InputError(f"episode {row['episode']}: object {row['object']!r} has no group")
+        by_group[groups[row["object"]]].append(row)
+    return {g: {"success_rate": float(np.mean([r["success"] for r in rows])),
+                "episodes": len(rows), "objects": len({r["object"] for r in rows})}
+            for g, rows in sorted(by_group.items())}
