@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from corn_drake.cli import build_parser, main
-from corn_drake.config import TrainConfig, load_config
+from corn_drake.commands.demo import TASK
+from corn_drake.run_config import load_run_config
 
 pytestmark = pytest.mark.slow
 
@@ -53,11 +54,11 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
 
     run = tmp_path / "teacher_corn"
     metrics = _report(run / "metrics.json")
-    cfg = load_config(run / "config.yaml", TrainConfig)
+    cfg = load_run_config(run)
     per_update = cfg.envs_per_worker * max(cfg.workers, 1) * cfg.rollout_steps
     # Whole updates until the requested steps are reached.
     updates = -(-args.train_steps // per_update)
-    assert cfg.total_steps == args.train_steps and cfg.policy == "corn"
+    assert cfg.total_steps == args.train_steps and cfg.policy == "corn" and cfg.env.task.name == TASK
     assert metrics["updates"] == len(metrics["history"]) == updates
     assert [h["step"] for h in metrics["history"]] == [per_update * (i + 1) for i in range(updates)]
     assert metrics["global_step"] == per_update * updates
@@ -67,6 +68,9 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
 
     evaluation = _report(tmp_path / "eval_corn.json")
     assert evaluation["split"] == "unseen" and len(evaluation["episodes"]) == args.eval_episodes
+    # Evaluated on the task the run was trained on, read from its config.yaml.
+    assert evaluation["task"] == cfg.env.task.name
+    assert evaluation["action_step"] == cfg.env.controller.max_position_delta
     assert set(evaluation["per_object"]) <= unseen
     assert 0.0 <= evaluation["success_rate"] <= 1.0
     assert all(e["position_error"] >= 0.0 and e["steps"] > 0 for e in evaluation["episodes"])
