@@ -1,12 +1,12 @@
 # Two commands set everything up on a fresh machine: `make test` and `make demo`.
-# `install` is idempotent: it re-runs pip only when pyproject.toml changes.
+# `install` is idempotent: it re-runs pip only when pyproject.toml or setup.py changes.
 SHELL := /bin/bash
 PYTHON ?= python3.11
 VENV := .venv
 STAMP := $(VENV)/.installed
 BIN := $(VENV)/bin
 
-.PHONY: install test demo bench system-deps clean
+.PHONY: install test test-fast demo bench system-deps clean
 
 install: system-deps $(STAMP)
 
@@ -23,7 +23,7 @@ system-deps:
 	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri; \
 	fi
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	# CPU torch first, so that no dependency resolution can reach for a CUDA build.
@@ -31,8 +31,14 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $(STAMP)
 
+# Every test, the slow ones included (what CI runs: .ci/run).
 test: install
 	$(BIN)/python -m pytest -q
+
+# The quick loop while editing: skips the tests marked slow (the demo, notebooks 02-03, a
+# procedural library, training subprocesses, the fresh non-editable install).
+test-fast: install
+	$(BIN)/python -m pytest -q -m "not slow"
 
 demo: install
 	$(BIN)/corn-drake demo

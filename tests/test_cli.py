@@ -26,12 +26,6 @@ def test_bench_sim_writes_report_with_baseline(tmp_path):
     assert "cpu_count" in data["machine"]
 
 
-def test_demo_runs_and_writes_its_outputs(tmp_path):
-    assert main(["demo", "--out", str(tmp_path), "--bench-steps", "20"]) == 0
-    assert (tmp_path / "scripted_push.html").stat().st_size > 10_000
-    assert json.loads((tmp_path / "bench_sim.json").read_text())["results"]["policy_steps_per_s"] > 0
-
-
 def test_train_then_evaluate_writes_the_report_keys(tmp_path):
     run = tmp_path / "run"
     assert main(["train", "--policy", "state", "--steps", "64", "--envs-per-worker", "2",

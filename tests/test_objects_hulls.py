@@ -83,6 +83,7 @@ def _blob() -> trimesh.Trimesh:
     return trimesh.Trimesh(v * radius[:, None] * [0.06, 0.04, 0.035], sphere.faces)
 
 
+@pytest.mark.slow
 def test_objects_command_on_real_meshes_writes_only_loadable_hulls(tmp_path, capsys):
     from corn_drake.cli import main
 

@@ -18,6 +18,8 @@ from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 
+pytestmark = pytest.mark.slow  # the module's library takes minutes to build
+
 # Every field a built object must carry (unseen_group is None for train objects).
 BUILT_FIELDS = ("id", "source", "family", "split", "radius", "mass", "thin", "hulls", "visual",
                 "cloud", "stable_poses", "bbox_corners", "unit_inertia", "num_hulls",

@@ -14,12 +14,12 @@ from pathlib import Path
 import pytest
 import torch
 
-from corn_drake import REPO_ROOT
 from corn_drake.cli import main
 from corn_drake.errors import InputError
 from corn_drake.run_config import load_run_config
 from corn_drake.run_folder import LOCK_NAME, lock_folder
 from tests.fixtures import write_tiny_library
+from tests.paths import REPO_ROOT
 
 # A one-update state run: 2 envs x 16 steps, 10-step episodes.
 TRAIN = ["train", "--policy", "state", "--envs-per-worker", "2", "--rollout-steps", "16",

@@ -58,6 +58,7 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
         curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png)))
 
 
+@pytest.mark.slow
 def test_killed_training_process_resumes_from_its_checkpoint(tmp_path):
     cmd = [sys.executable, "-m", "corn_drake.cli", "train", "--policy", "state", "--steps", "100000",
            "--envs-per-worker", "2", "--rollout-steps", "16", "--set", "task.episode_steps=20",
@@ -200,6 +201,7 @@ def test_a_fixed_object_id_keeps_one_object(tmp_path):
         batch.step(np.zeros((3, 20)))
 
 
+@pytest.mark.slow
 def test_train_cli_writes_episodes_per_object_for_every_train_object(tmp_path):
     """A tiny `train` over a 6-object library (plus one unseen) trains on all six, and a resume
     keeps counting from the checkpoint."""

@@ -246,10 +246,9 @@ def seconds_per_step(model_kind: str, batch_size: int, repeats: int = 3) -> floa
 
 def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
     """A few unseen (or held-out) clouds coloured by predicted vs true patch contact."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A Figure of its own, not pyplot: writing the file leaves the process's backend alone,
+    # so a notebook that trains in its kernel keeps plotting inline.
+    from matplotlib.figure import Figure
 
     from corn_drake.scene.gripper import gripper_boxes
 
@@ -259,7 +258,7 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
         data = load_split(trainer.data, "val")
     labels = data["labels"]
     picks = np.flatnonzero(labels.any(1))[:count]
-    fig = plt.figure(figsize=(4 * len(picks), 8))
+    fig = Figure(figsize=(4 * len(picks), 8))
     trainer.model.eval()
     with torch.no_grad():
         for col, i in enumerate(picks):
@@ -290,4 +289,3 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=80)
-    plt.close(fig)

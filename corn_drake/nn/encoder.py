@@ -61,6 +61,10 @@ class CORNEncoder(nn.Module):
 
         `indices` = patch_indices(points) may be passed in when known (a cloud moved rigidly).
         """
+        if hand.shape != (points.shape[0], self.hand.in_features):
+            # Named here: torch would only report a matmul or cat size mismatch.
+            raise ValueError(f"hand must be (B, {self.hand.in_features}) with B = "
+                             f"{points.shape[0]} clouds, got {tuple(hand.shape)}")
         center_idx, knn_idx = indices if indices is not None else patch_indices(
             points, self.num_patches, self.patch_size)
         centers, patches = group(points, center_idx, knn_idx)

@@ -42,8 +42,10 @@ def patch_indices(points: torch.Tensor, num_patches: int = 16, patch_size: int =
     """(centre indices (B, G), patch indices (B, G, k)) for a batch of clouds (B, N, 3)."""
     if points.ndim != 3 or points.shape[-1] != 3:
         raise ValueError(f"points must be (B, N, 3), got {tuple(points.shape)}")
-    if points.shape[1] < patch_size:
-        raise ValueError(f"clouds need at least {patch_size} points, got {points.shape[1]}")
+    if points.shape[1] < max(patch_size, num_patches):
+        # Fewer points than centres would make FPS repeat point 0 (every distance is then 0).
+        raise ValueError(f"clouds need at least {max(patch_size, num_patches)} points "
+                         f"({num_patches} patches of {patch_size}), got {points.shape[1]}")
     center_idx = farthest_point_sample(points, num_patches)
     centers = gather_points(points, center_idx)
     return center_idx, knn_indices(points, centers, patch_size)

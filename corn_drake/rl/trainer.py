@@ -208,17 +208,17 @@ def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> N
 
 def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
     """Success rate and return against env steps, one line per run (label -> history rows)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A Figure of its own, not pyplot: writing the file leaves the process's backend alone,
+    # so a notebook that trains in its kernel keeps plotting inline.
+    from matplotlib.figure import Figure
 
     runs = {label: history for label, history in runs.items() if history}
     if not runs:
         return
     from matplotlib.ticker import EngFormatter
 
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+    fig = Figure(figsize=(9, 3.2))
+    axes = fig.subplots(1, 2)
     for label, history in runs.items():
         # Rows before the first finished episode hold placeholder zeros, and those before the
         # window holds WINDOW episodes average over the few that ended first — mostly early
@@ -240,4 +240,3 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
