@@ -139,8 +139,9 @@ class ObjectConfig:
 class RandomizationConfig:
     enabled: bool = True
     mass: list[float] = dc.field(default_factory=lambda: [0.1, 0.5])
-    # Object radius after scaling (m); [0, 0] keeps the object's own size.
-    object_radius: list[float] = dc.field(default_factory=lambda: [0.0, 0.0])
+    # Rescale each episode's object to a radius (m) drawn from [low, high]; absent (null), the
+    # object keeps its own size (library objects are sized when the library is built).
+    object_radius: typing.Optional[list[float]] = None
     object_friction: list[float] = dc.field(default_factory=lambda: [0.7, 1.0])
     table_friction: list[float] = dc.field(default_factory=lambda: [0.3, 0.8])
     finger_friction: list[float] = dc.field(default_factory=lambda: [1.0, 1.5])

@@ -249,3 +249,17 @@ def test_torque_noise_is_fresh_every_episode_and_reproducible_from_the_seed():
     # A second env built with the same seed replays the same noise (Drake's own default seeds
     # differ per RandomSource instance, so this holds only if reset reseeds from the env's RNG).
     np.testing.assert_array_equal(_torque_noise(TeacherEnv(cfg), seed=0), first)
+
+
+def test_object_radius_rescales_only_when_given_and_checks_its_range():
+    env = TeacherEnv()
+    env.reset(seed=0)
+    assert env.episode.physics.scale == 1.0  # default: the object's own size
+    cfg = load_config_string("randomization: {object_radius: [0.03, 0.03]}", TeacherDiagramConfig)
+    env = TeacherEnv(cfg)
+    env.reset(seed=0)
+    assert np.isclose(env.episode.physics.scale * env.scene.object_spec.radius, 0.03)
+    for bad in ("[0.0, 0.0]", "[0.05, 0.03]", "[0.03]"):
+        cfg = load_config_string(f"randomization: {{object_radius: {bad}}}", TeacherDiagramConfig)
+        with pytest.raises(InputError, match="randomization.object_radius"):
+            TeacherEnv(cfg).reset(seed=0)

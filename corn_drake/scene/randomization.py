@@ -14,6 +14,7 @@ from pydrake.geometry import (AddRigidHydroelasticProperties, ProximityPropertie
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from corn_drake.config import RandomizationConfig
+from corn_drake.errors import InputError
 from corn_drake.scene.builder import (DEFAULT_FINGER_FRICTION, DEFAULT_OBJECT_FRICTION,
                                       DEFAULT_TABLE_FRICTION, Scene, friction_properties,
                                       object_proximity_properties, object_shapes,
@@ -56,7 +57,11 @@ def sample_physics(cfg: RandomizationConfig, scene: Scene, rng: np.random.Genera
         return float(rng.uniform(r[0], r[1]))
 
     scale = 1.0
-    if cfg.object_radius[1] > 0:
+    if cfg.object_radius is not None:
+        r = cfg.object_radius
+        if not (len(r) == 2 and 0 < r[0] <= r[1]):
+            raise InputError(f"randomization.object_radius must be [low, high] with 0 < low <= "
+                             f"high (m), or null to keep the object's size; got {cfg.object_radius}")
         scale = u(cfg.object_radius) / scene.object_spec.radius
     return PhysicsSample(mass=u(cfg.mass), scale=scale, object_friction=u(cfg.object_friction),
                          table_friction=u(cfg.table_friction),
