@@ -67,6 +67,15 @@ class _Draw:
         raise self.unmet("object start", f"task.goal.object_min_distance_to_hand "
                                          f"{min_distance_to_hand} m")
 
+    def start(self, min_distance_to_hand: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(start pose7, its stable pose, its rotation): a random stable pose at a random yaw,
+        at least min_distance_to_hand (xy) from the tool. The draw order (xy, pose, yaw) is
+        what fixed seeds reproduce."""
+        xy = self.start_xy(min_distance_to_hand)
+        init = self.stable_pose()
+        R0 = yaw_matrix(self.rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
+        return _placed(xy, init, R0), init, R0
+
     def unmet(self, what: str, ranges: str) -> InputError:
         t = self.task
         return InputError(
@@ -83,10 +92,7 @@ def _placed(xy: np.ndarray, stable_pose: np.ndarray, R: np.ndarray) -> np.ndarra
 
 def _full6d(d: _Draw, g: Full6dGoal) -> tuple[np.ndarray, np.ndarray]:
     rng = d.rng
-    xy = d.start_xy(g.object_min_distance_to_hand)
-    init = d.stable_pose()
-    R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
-    start = _placed(xy, init, R0)
+    start, init, _ = d.start(g.object_min_distance_to_hand)
     goal_pose = init if d.thin else d.stable_pose()
     for _ in range(TRIES):
         gxy = np.array([rng.uniform(*d.task.goal_x), rng.uniform(*d.task.goal_y)])
@@ -101,10 +107,7 @@ def _full6d(d: _Draw, g: Full6dGoal) -> tuple[np.ndarray, np.ndarray]:
 
 def _planar(d: _Draw, g: PlanarGoal) -> tuple[np.ndarray, np.ndarray]:
     rng = d.rng
-    xy = d.start_xy(g.object_min_distance_to_hand)
-    init = d.stable_pose()
-    R0 = yaw_matrix(rng.uniform(-np.pi, np.pi)) @ quat_wxyz_to_matrix(init[3:])
-    start = _placed(xy, init, R0)
+    start, _, R0 = d.start(g.object_min_distance_to_hand)
     for _ in range(TRIES):
         heading = rng.uniform(-np.pi, np.pi)
         gxy = start[:2] + rng.uniform(*g.distance) * np.array([np.cos(heading), np.sin(heading)])
