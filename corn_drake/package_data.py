@@ -53,7 +53,7 @@ def diagrams_dir() -> Path:
 
 
 def diagram_path(name: str | Path) -> Path:
-    """A shipped diagram YAML by its path relative to diagrams/ ("evaluation.yaml",
+    """A shipped diagram YAML by its path relative to diagrams/ ("teacher_rollout.yaml",
     "tasks/push.yaml"); the ".yaml" may be left off. Names the available ones when absent."""
     root = diagrams_dir()
     path = root / name
