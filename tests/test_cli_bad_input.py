@@ -77,6 +77,7 @@ ROWS = [
     _row(f"pretrain --data {{root}}/nowhere {OUT}", "{root}/nowhere"),
     # train (items 9, 14, 15)
     _row(f"train --steps 0 {OUT}", "--steps"),
+    _row(f"train --resume {OUT}", "--resume", "no run to resume"),
     _row(f"train --steps -5 {OUT}", "--steps"),
     _row(f"train --envs-per-worker 0 {OUT}", "--envs-per-worker"),
     _row(f"train --rollout-steps 0 {OUT}", "--rollout-steps"),

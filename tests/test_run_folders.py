@@ -73,7 +73,7 @@ def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_st
     # --steps may grow, and the recorded config is the rest: the run resumes from it with no
     # other argument, says what changed, and its config records the new total.
     capsys.readouterr()
-    assert main(["train", "--steps", "64", "--out", str(run), "--no-progress"]) == 0
+    assert main(["train", "--resume", "--steps", "64", "--out", str(run), "--no-progress"]) == 0
     assert f"resume {run}: total_steps 32 -> 64\n" in capsys.readouterr().out
     resumed = load_run_config(run)
     assert resumed.total_steps == 64 and resumed.env.task.episode_steps == 10

@@ -3,7 +3,7 @@
 A new run's config is built in layers (corn_drake/run_config.py): the base diagram, the
 `--task` overlay, then the shortcut flags and `--set KEY=VALUE` overrides; the result is
 written into OUT/config.yaml. Training into an existing run resumes it from that file: `--out`
-is all it needs. An argument given on a resume is an override of the recorded config, checked
+is all it needs (`--resume` makes that a requirement, so a mistyped folder is not a new run). An argument given on a resume is an override of the recorded config, checked
 before anything is written: --steps may grow, --ray-address (and checkpoint_every) may change;
 any other difference is refused, naming the argument and both values. What an accepted
 override changes is printed.
@@ -37,6 +37,9 @@ def add_arguments(parser):
     parser.add_argument("--out", required=True,
                         help="run folder, e.g. runs/NAME; an existing run resumes from its "
                              "config.yaml (no other argument needed)")
+    parser.add_argument("--resume", action="store_true",
+                        help="OUT must be an existing run (refuses to start a new one, e.g. "
+                             "on a mistyped folder)")
     parser.add_argument("--task", default=None,
                         help="task overlay: a name in diagrams/tasks/ or a YAML file "
                              "(default: the base diagram, the paper's 6D task)")
@@ -93,6 +96,7 @@ def requested_config(args, recorded):
 
 
 def run(args) -> int:
+    from corn_drake.errors import InputError
     from corn_drake.rl.encoders import load_encoder
     from corn_drake.rl.trainer import Trainer
     from corn_drake.run_config import (config_changes, load_run_config, run_config_path,
@@ -104,6 +108,9 @@ def run(args) -> int:
         # Everything that can refuse comes before the first write: a refused resume leaves the
         # run as it was (its config.yaml is what `evaluate` rebuilds the policy from).
         recorded = load_run_config(out) if run_config_path(out).is_file() else None
+        if args.resume and recorded is None:
+            raise InputError(f"--resume: {out} holds no run to resume (no "
+                             f"{run_config_path(out).name}); leave --resume off to start one")
         cfg = requested_config(args, recorded)
         if cfg.env.scene.object.cycles_library:
             from corn_drake.rl.vec_env import library_train_ids
