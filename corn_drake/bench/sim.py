@@ -182,8 +182,9 @@ def run(args) -> dict:
         raise InputError(f"--envs {args.envs} < --workers {args.workers}: "
                          "every Ray worker needs an env")
     env = TeacherEnv(args.config)
-    if env.cfg.randomization.object_radius[1] > 0:
-        raise InputError("bench sim replays torques on a fixed-size object; disable scale randomization")
+    if env.cfg.randomization.object_radius is not None:
+        raise InputError("bench sim replays torques on a fixed-size object: set "
+                         "randomization.object_radius to null (no size randomization)")
     _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
     plans = _episodes(env, args.steps, args.seed)
     recorded = _record(env, plans)
