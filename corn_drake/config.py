@@ -219,6 +219,17 @@ class TeacherDiagramConfig:
     task: TaskConfig = dc.field(default_factory=TaskConfig)
     seed: int = 0
 
+    def check(self) -> None:
+        """InputError naming the first field no episode could be built from (object, size
+        randomization, task ranges). Commands call it before they write a run's config, so a
+        bad value is refused up front instead of failing the run at its first reset."""
+        from corn_drake.scene.randomization import check_randomization
+        from corn_drake.tasks.sampling import check_task
+
+        self.scene.object.check()
+        check_randomization(self.randomization)
+        check_task(self.task)
+
 
 @dc.dataclass
 class PPOConfig:

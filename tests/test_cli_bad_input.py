@@ -293,3 +293,18 @@ def test_ingest_resumes_a_manifest_without_bookkeeping_keys(tmp_path):
     assert [r.source for r in manifest.rejected] == ["broken.obj"]
     on_disk = json.loads((out / "manifest.json").read_text())["rejected"]
     assert on_disk == [{"source": r.source, "reason": r.reason} for r in manifest.rejected]
+
+
+@pytest.mark.parametrize("setting, names", [
+    ("task.goal_x=[0.2,0.1]", ("task.goal_x",)),
+    ("randomization.object_radius=[0,0]", ("randomization.object_radius",)),
+])
+def test_train_refuses_a_task_no_episode_can_come_from_before_writing(tmp_path, capsys, setting,
+                                                                     names):
+    """A range no episode can be drawn from is refused before the run's config is written: a
+    written one could never be resumed with the corrected value."""
+    out = tmp_path / "run"
+    assert main(["train", "--set", setting, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert all(name in err for name in names), err
+    assert not (out / "config.yaml").exists()

@@ -105,6 +105,7 @@ def run(args) -> int:
         policy = base.policy
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
+    cfg.check()  # an override no episode can be built from, before any episode
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.

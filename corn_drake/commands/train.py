@@ -116,6 +116,7 @@ def run(args) -> int:
             from corn_drake.rl.vec_env import library_train_ids
 
             library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
+        cfg.env.check()  # a value no episode can be built from is refused before any write
         if recorded is not None:
             refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,
                                   ignore=RESUME_MAY_CHANGE, name=argument_of_field)

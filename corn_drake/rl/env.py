@@ -34,6 +34,7 @@ class TeacherEnv(gym.Env):
         the episode's seed reseeds) instead of taking the mean."""
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
+        config.check()
         self.cfg = config
         self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent,
                                                              stochastic_policy)

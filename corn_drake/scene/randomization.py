@@ -49,6 +49,14 @@ def nominal_sample(scene: Scene) -> PhysicsSample:
                          torque_noise_std=0.0)
 
 
+def check_randomization(cfg: RandomizationConfig) -> None:
+    """InputError naming a randomization range no draw can come from."""
+    r = cfg.object_radius
+    if r is not None and not (len(r) == 2 and 0 < r[0] <= r[1]):
+        raise InputError(f"randomization.object_radius must be [low, high] with 0 < low <= "
+                         f"high (m), or null to keep the object's size; got {r}")
+
+
 def sample_physics(cfg: RandomizationConfig, scene: Scene, rng: np.random.Generator) -> PhysicsSample:
     if not cfg.enabled:
         return nominal_sample(scene)
@@ -56,12 +64,9 @@ def sample_physics(cfg: RandomizationConfig, scene: Scene, rng: np.random.Genera
     def u(r):
         return float(rng.uniform(r[0], r[1]))
 
+    check_randomization(cfg)
     scale = 1.0
     if cfg.object_radius is not None:
-        r = cfg.object_radius
-        if not (len(r) == 2 and 0 < r[0] <= r[1]):
-            raise InputError(f"randomization.object_radius must be [low, high] with 0 < low <= "
-                             f"high (m), or null to keep the object's size; got {cfg.object_radius}")
         scale = u(cfg.object_radius) / scene.object_spec.radius
     return PhysicsSample(mass=u(cfg.mass), scale=scale, object_friction=u(cfg.object_friction),
                          table_friction=u(cfg.table_friction),
