@@ -169,10 +169,13 @@ def apply_sets(cfg: TrainConfig, items: Iterable[str], only: str | None = None,
 
 
 def config_changes(before, after) -> list[Change]:
-    """Every field whose value differs between two configs of one schema."""
+    """Every field whose value differs between two configs of one schema, including fields only
+    one side has (another variant of a tagged union, e.g. a task's goal: the one side's value
+    is then None)."""
     old, new = config_fields(before), config_fields(after)
-    return [Change(key, old.get(key), value) for key, value in new.items()
-            if old.get(key) != value]
+    keys = list(new) + [key for key in old if key not in new]
+    return [Change(key, old.get(key), new.get(key)) for key in keys
+            if old.get(key) != new.get(key)]
 
 
 # --- the run folder ----------------------------------------------------------------------------
