@@ -160,14 +160,14 @@ class SegmentationConfig:
     # object pressed against the finger pads); grow it for a real robot's calibration error.
     robot_margin: float = 0.005
     # Radius outlier removal: a point stays with at least n neighbours within outlier_radius.
-    # outlier_min_points is the paper's n = 96, for a D435 at 640 x 480, i.e. at
+    # outlier_neighbours is the paper's n = 96, for a D435 at 640 x 480, i.e. at
     # outlier_reference_px_per_m (about 560 px/m at 0.6 m). outlier_scaling "pixel_density"
     # scales n by (this rig's px/m / reference)^2 (the ratio of points a patch of surface
     # gets), never below 2: the default 128 x 96 rig has 174 px/m, n = 9. "none" uses
-    # outlier_min_points as it is (0 or 1 keeps every point).
+    # outlier_neighbours as it is (0 or 1 keeps every point).
     outlier_radius: float = 0.02
     outlier_scaling: str = "pixel_density"
-    outlier_min_points: int = 96
+    outlier_neighbours: int = 96
     outlier_reference_px_per_m: float = 560.0
     # DBSCAN on what is left; the largest cluster is the object. eps is at least
     # dbscan_min_eps_pixels pixel footprints (1 / px_per_m): with coarse images an eps below
@@ -188,9 +188,9 @@ class SegmentationConfig:
         if self.outlier_scaling not in OUTLIER_SCALINGS:
             raise InputError(f"segmentation.outlier_scaling must be one of "
                              f"{', '.join(OUTLIER_SCALINGS)}, got {self.outlier_scaling!r}")
-        if self.outlier_min_points < 0:
-            raise InputError(f"segmentation.outlier_min_points must be >= 0 (a neighbour count), "
-                             f"got {self.outlier_min_points}")
+        if self.outlier_neighbours < 0:
+            raise InputError(f"segmentation.outlier_neighbours must be >= 0 (a neighbour count), "
+                             f"got {self.outlier_neighbours}")
         if self.dbscan_min_eps_pixels < 0:
             raise InputError(f"segmentation.dbscan_min_eps_pixels must be >= 0, "
                              f"got {self.dbscan_min_eps_pixels}")

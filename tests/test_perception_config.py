@@ -74,8 +74,10 @@ def test_loader_names_the_file_and_the_field(tmp_path):
     bad.write_text("segmentation: {outlier_min_point: 5}\n")
     with pytest.raises(InputError, match="bad.yaml.*outlier_min_point"):
         load_student_config(bad)
-    bad.write_text("segmentation: {outlier_min_points: -1}\n")  # the old "scale it" sentinel
-    with pytest.raises(InputError, match="segmentation.outlier_min_points"):
+    # The old field: its -1 meant "scale it", a count meant a fixed count; the count now scales
+    # by default, so the old name is refused rather than silently reinterpreted.
+    bad.write_text("segmentation: {outlier_min_points: 30}\n")
+    with pytest.raises(InputError, match="outlier_min_points"):
         load_student_config(bad)
     with pytest.raises(InputError, match="not found"):
         load_student_config(tmp_path / "missing.yaml")
@@ -122,7 +124,7 @@ def _bad(edit):
                 setattr(c.cameras.camera, "label", False)), "cameras.camera.label"),
     (lambda c: setattr(c.segmentation, "mode", "labels"), "segmentation.mode"),
     (lambda c: setattr(c.segmentation, "outlier_scaling", "auto"), "segmentation.outlier_scaling"),
-    (lambda c: setattr(c.segmentation, "outlier_min_points", -1), "segmentation.outlier_min_points"),
+    (lambda c: setattr(c.segmentation, "outlier_neighbours", -1), "segmentation.outlier_neighbours"),
     (lambda c: setattr(c.segmentation, "outlier_radius", 0.0), "segmentation.outlier_radius"),
     (lambda c: setattr(c.segmentation, "num_points", 0), "segmentation.num_points"),
     (lambda c: setattr(c.tracker, "reregister_fitness", 1.5), "tracker.reregister_fitness"),
@@ -150,14 +152,14 @@ def test_defaults_pass_the_check():
 
 def test_outlier_count_scales_with_pixel_density_or_is_taken_as_given():
     seg = StudentDiagramConfig().segmentation
-    assert seg.outlier_scaling == "pixel_density" and seg.outlier_min_points == 96
+    assert seg.outlier_scaling == "pixel_density" and seg.outlier_neighbours == 96
     # At the paper's D435 density n is the paper's 96; at the default rig's 174 px/m it is
     # 96 * (174 / 560)^2 = 9.3 -> 9; never below 2.
     assert outlier_points(seg, seg.outlier_reference_px_per_m) == 96
     assert outlier_points(seg, 174.18) == 9
     assert outlier_points(seg, 10.0) == 2
     fixed = copy.deepcopy(seg)
-    fixed.outlier_scaling, fixed.outlier_min_points = "none", 30
+    fixed.outlier_scaling, fixed.outlier_neighbours = "none", 30
     assert outlier_points(fixed, 174.18) == outlier_points(fixed, 560.0) == 30
     fixed.outlier_scaling = "auto"
     with pytest.raises(InputError, match="outlier_scaling"):

@@ -105,12 +105,12 @@ def outlier_points(cfg, px_per_m: float) -> int:
     """Radius-outlier neighbour count n for images of `px_per_m` (SegmentationConfig explains
     outlier_scaling): the paper's count scaled by the ratio of points per surface patch."""
     if cfg.outlier_scaling == "none":
-        return cfg.outlier_min_points
+        return cfg.outlier_neighbours
     if cfg.outlier_scaling != "pixel_density":
         raise InputError(f"segmentation.outlier_scaling must be pixel_density or none, "
                          f"got {cfg.outlier_scaling!r}")
     scale = (px_per_m / cfg.outlier_reference_px_per_m) ** 2
-    return max(2, int(round(cfg.outlier_min_points * scale)))
+    return max(2, int(round(cfg.outlier_neighbours * scale)))
 
 
 def dbscan_eps(cfg, px_per_m: float) -> float:
