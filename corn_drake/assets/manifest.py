@@ -13,9 +13,11 @@ mesh-processing stack the library builder uses.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import types
 import typing
 from pathlib import Path
+from typing import Any
 
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.io_utils import read_json, write_json
@@ -118,29 +120,38 @@ def _matches(value, hint) -> bool:
     return isinstance(value, hint)
 
 
+@functools.cache
+def _schema(cls) -> tuple[dict[str, Any], tuple[str, ...], bool]:
+    """({field: type hint} of the JSON fields, the required ones, whether it keeps unknown
+    fields in `extra`) of a record class: resolved
+    once per class, not once per object (get_type_hints is slow, and a library has hundreds)."""
+    hints = typing.get_type_hints(cls)
+    fields = [f for f in dataclasses.fields(cls) if f.name != "extra"]
+    required = tuple(f.name for f in fields if f.default is dataclasses.MISSING
+                     and f.default_factory is dataclasses.MISSING)
+    keeps_extra = any(f.name == "extra" for f in dataclasses.fields(cls))
+    return {f.name: hints[f.name] for f in fields}, required, keeps_extra
+
+
 def _from_json(cls, data, where: str, path: Path):
     """`cls` from a JSON object; a non-object, a missing required field or a value of the
     wrong type raises an InputError naming `where` and the field."""
     if not isinstance(data, dict):
         raise InputError(f"{WHAT} {path}: {where} is not an object")
-    hints = typing.get_type_hints(cls)
-    named = {f.name for f in dataclasses.fields(cls) if f.name != "extra"}
+    hints, required, keeps_extra = _schema(cls)
     values = {}
-    for f in dataclasses.fields(cls):
-        if f.name not in named or f.name not in data:
+    for name, hint in hints.items():
+        if name not in data:
             continue
-        if not _matches(data[f.name], hints[f.name]):
-            raise InputError(f"{WHAT} {path}: {where} field {f.name!r} must be "
-                             f"{_type_name(hints[f.name])}, got {data[f.name]!r}")
-        values[f.name] = data[f.name]
-    required = [f.name for f in dataclasses.fields(cls)
-                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+        if not _matches(data[name], hint):
+            raise InputError(f"{WHAT} {path}: {where} field {name!r} must be "
+                             f"{_type_name(hint)}, got {data[name]!r}")
+        values[name] = data[name]
     for name in required:
         if name not in values:
             raise InputError(f"{WHAT} {path}: {where} has no {name!r}")
-    extra = {k: v for k, v in data.items() if k not in named}
-    if "extra" in hints:
-        values["extra"] = extra
+    if keeps_extra:
+        values["extra"] = {k: v for k, v in data.items() if k not in hints}
     return cls(**values)
 
 

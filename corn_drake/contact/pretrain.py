@@ -267,7 +267,7 @@ def plot_predictions(trainer: Pretrainer, path: Path, count: int = 3) -> None:
                                 normalization=trainer.normalization)
             logits, targets, _ = trainer._forward(pts, hand, torch.from_numpy(labels[i:i + 1]))
             _, knn = patch_indices(pts)
-            point_patch = torch.zeros(512, dtype=torch.long)
+            point_patch = torch.zeros(pts.shape[1], dtype=torch.long)
             point_patch[knn[0].flatten()] = torch.arange(16).repeat_interleave(32)
             for row, (values, title) in enumerate(((logits[0] > 0, "predicted"), (targets[0], "true"))):
                 ax = fig.add_subplot(2, len(picks), row * len(picks) + col + 1, projection="3d")

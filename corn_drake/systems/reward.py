@@ -43,11 +43,13 @@ def pose_errors(p, R, p_goal, R_goal) -> tuple[float, float]:
 # The previous policy step, held as one vector: [object_state, hand_state, energy].
 PREVIOUS_PARTS = (FREE_BODY_STATE_DIM, HAND_STATE_DIM, 1)
 PREVIOUS_SIZE = sum(PREVIOUS_PARTS)
+# Where each part starts in it: computed once, not on every reward evaluation.
+_PREVIOUS_SPLITS = tuple(int(i) for i in np.cumsum(PREVIOUS_PARTS)[:-1])
 
 
 def split_previous(held: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """(object_state, hand_state, energy) of the held previous-step vector."""
-    object_state, hand_state, energy = np.split(held, np.cumsum(PREVIOUS_PARTS)[:-1])
+    object_state, hand_state, energy = np.split(held, _PREVIOUS_SPLITS)
     return object_state, hand_state, float(energy[0])
 
 
