@@ -69,21 +69,26 @@ class PhysicsConfig:
         self.plant.time_step = value
 
 
-def _plant_config_from_yaml(text: str) -> MultibodyPlantConfig:
+def _from_yaml(schema, text: str):
     from pydrake.common.yaml import yaml_load_typed
 
-    return yaml_load_typed(schema=MultibodyPlantConfig, data=text)
+    return yaml_load_typed(schema=schema, data=text)
 
 
-def _reduce_plant_config(plant: MultibodyPlantConfig):
+def _reduce_as_yaml(value):
     from pydrake.common.yaml import yaml_dump_typed
 
-    return _plant_config_from_yaml, (yaml_dump_typed(plant),)
+    return _from_yaml, (type(value), yaml_dump_typed(value))
 
 
-# Drake's config structs do not pickle, and Ray ships configs to its workers (rl/ray_workers.py):
-# a MultibodyPlantConfig travels as its YAML, the text config.yaml holds for it.
-copyreg.pickle(MultibodyPlantConfig, _reduce_plant_config)
+def pickle_as_yaml(schema) -> None:
+    """Lets instances of one of Drake's config structs pickle, as their YAML (the text a run's
+    config.yaml holds for them): Drake's structs do not pickle, and Ray ships configs to its
+    workers (rl/ray_workers.py)."""
+    copyreg.pickle(schema, _reduce_as_yaml)
+
+
+pickle_as_yaml(MultibodyPlantConfig)
 
 
 OBJECT_KINDS = ("box", "cylinder", "library")

@@ -9,13 +9,12 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 """
 
 
-import copyreg
 import dataclasses as dc
 import math
 
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config import TeacherDiagramConfig
+from corn_drake.config import TeacherDiagramConfig, pickle_as_yaml
 from corn_drake.contract import ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
 
@@ -54,21 +53,8 @@ def default_camera() -> CameraConfig:
         name="camera", rgb=False, depth=True, label=True)
 
 
-def _camera_config_from_yaml(text: str) -> CameraConfig:
-    from pydrake.common.yaml import yaml_load_typed
-
-    return yaml_load_typed(schema=CameraConfig, data=text)
-
-
-def _reduce_camera_config(camera: CameraConfig):
-    from pydrake.common.yaml import yaml_dump_typed
-
-    return _camera_config_from_yaml, (yaml_dump_typed(camera),)
-
-
-# Drake's config structs do not pickle; a student config travels to Ray workers like the
-# teacher's, so a CameraConfig travels as its YAML (the text a run's config.yaml holds for it).
-copyreg.pickle(CameraConfig, _reduce_camera_config)
+# A student config travels to Ray workers like the teacher's.
+pickle_as_yaml(CameraConfig)
 
 
 def _check_point(name: str, value) -> None:

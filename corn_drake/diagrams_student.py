@@ -15,23 +15,20 @@ diagrams/student_rollout.yaml) on top of `base` (default: StudentDiagramConfig()
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, RandomSource
 
 import corn_drake
-from corn_drake.config import _load_typed
+from corn_drake.config import load_config
 from corn_drake.config_student import StudentDiagramConfig
 from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
                                  POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
 from corn_drake.diagrams import TeacherDiagram, add_teacher_systems
-from corn_drake.errors import InputError, MissingInputError
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
@@ -78,17 +75,8 @@ def load_student_config(path: str | Path | None = None,
     type or a value the diagram cannot run with raises an InputError naming the file or field.
     """
     path = Path(path) if path is not None else student_base_path()
-    if not path.is_file():
-        raise MissingInputError(f"config file not found: {path}")
-    defaults = copy.deepcopy(base) if base is not None else StudentDiagramConfig()
-    try:
-        # load_config's own loader and error reporting, with yaml_load_typed's defaults= layering.
-        cfg = _load_typed(StudentDiagramConfig, str(path), filename=str(path), defaults=defaults)
-    except yaml.YAMLError as e:
-        # A value Drake could not convert, in a file with Drake's tags (focal: !FovDegrees ...):
-        # the field finder's plain YAML reader cannot read those tags; report Drake's error.
-        cause = e.__context__ or e
-        raise InputError(f"invalid config {path}: {' '.join(str(cause).split())}") from cause
+    # yaml_load_typed copies `defaults`: the caller's base is left as it was.
+    cfg = load_config(path, StudentDiagramConfig, defaults=base or StudentDiagramConfig())
     cfg.check()
     return cfg
 
