@@ -44,10 +44,6 @@ class PerceptionHandles:
     segmentation: ObjectSegmentation
     tracker: PoseTracker
 
-    @property
-    def px_per_m(self) -> float:
-        return self.rig.px_per_m
-
 
 @dataclasses.dataclass
 class StudentDiagram:

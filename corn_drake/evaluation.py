@@ -70,13 +70,12 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
-             in_diagram: bool = True, stochastic: bool = False) -> dict:
+             stochastic: bool = False) -> dict:
     """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
     in the diagram of `cfg` (a TeacherDiagramConfig); the first `record` are saved as Meshcat
-    HTML in `out_dir`. Episode k is seeded `seed + k`. With in_diagram (the evaluation
-    diagram), a PolicySystem runs the agent inside the diagram; otherwise the env is stepped
-    with agent.act(obs) (or agent(obs)). With `stochastic` (in the diagram only), actions are
-    sampled from the policy, the noise drawn from the episode's seed.
+    HTML in `out_dir`. Episode k is seeded `seed + k`. A PolicySystem runs the agent inside
+    the diagram (the evaluation diagram); with `stochastic` it samples the actions from the
+    policy, the noise drawn from the episode's seed.
 
     Returns the report: task (cfg.task.name), action_step (cfg.controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
@@ -84,8 +83,6 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     """
     from corn_drake.rl.env import TeacherEnv
 
-    if stochastic and not in_diagram:
-        raise ValueError("evaluate: stochastic actions are sampled inside the diagram (in_diagram)")
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
     meshcat = None
@@ -99,9 +96,9 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
             envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat,
-                                         agent if in_diagram else None, stochastic)
+                                         agent, stochastic)
         path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
-        result = run_episode(envs[object_id], None if in_diagram else agent, seed=seed + k,
+        result = run_episode(envs[object_id], seed=seed + k,
                              record_path=path)
         per_object[object_id].append(result.success)
         rows.append({"episode": k, "object": object_id, "success": result.success,

@@ -94,8 +94,6 @@ class CameraRig:
     to_cloud: list[DepthImageToPointCloud]
     aim: CameraAim | None
     camera: CameraConfig  # the one camera every eye renders with (focal set for the mode)
-    infos: list[CameraInfo]
-    fov_y: float  # vertical field of view, rad
     px_per_m: float  # image rows per metre at the mean eye distance (pixels_per_metre)
 
     def cloud_ports(self):
@@ -204,7 +202,6 @@ def add_camera_rig(builder: DiagramBuilder, scene_graph: SceneGraph, cfg, object
         sensors.append(sensor)
         to_cloud.append(conv)
     return CameraRig(sensors=sensors, to_cloud=to_cloud, aim=aim, camera=camera,
-                     infos=[info] * len(sensors), fov_y=float(info.fov_y()),
                      px_per_m=pixels_per_metre(eyes, cfg.look_at, info))
 
 

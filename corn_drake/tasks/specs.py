@@ -51,4 +51,3 @@ class PushFromHandGoal:
 # The first variant is what an untagged `goal:` mapping loads as (and how yaml_dump_typed
 # writes it back: untagged).
 GoalSpec = typing.Union[Full6dGoal, PlanarGoal, PushFromHandGoal]
-GOAL_VARIANTS = typing.get_args(GoalSpec)
