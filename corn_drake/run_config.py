@@ -79,17 +79,8 @@ def load_env_config(task: str | Path | None = None) -> TeacherDiagramConfig:
     if task is None:
         return cfg
     path = task_file(task)
-    cfg = load_config(path, TeacherDiagramConfig, defaults=cfg)
-    if not _sets_task_name(path):
-        cfg.task.name = path.stem
-    return cfg
-
-
-def _sets_task_name(path: Path) -> bool:
-    from corn_drake.config import read_tagged_yaml
-
-    data = read_tagged_yaml(path.read_text())  # loaded (and checked) by load_config already
-    return isinstance(data, dict) and isinstance(data.get("task"), dict) and "name" in data["task"]
+    cfg.task.name = path.stem  # the name unless the overlay sets its own on top
+    return load_config(path, TeacherDiagramConfig, defaults=cfg)
 
 
 def replace_task(cfg: TrainConfig, task: str | Path) -> TrainConfig:
