@@ -89,6 +89,11 @@ def check_camera(camera: CameraConfig, name: str = "cameras.camera") -> None:
         raise InputError(f"{name}.depth must be true: the perception chain reads depth images")
     if not camera.name:
         raise InputError(f"{name}.name must not be empty (it names the camera systems)")
+    if not (camera.renderer_class in ("", "RenderEngineVtk")
+            or type(camera.renderer_class).__name__ == "RenderEngineVtkParams"):
+        raise InputError(f"{name}.renderer_class: the camera rig renders with RenderEngineVtk "
+                         f"('', 'RenderEngineVtk' or !RenderEngineVtkParams), got "
+                         f"{camera.renderer_class!r}")
     try:
         camera.MakeCameras()  # Drake's own checks: sizes, focal, centre, ranges
     except RuntimeError as e:

@@ -109,6 +109,8 @@ def _bad(edit):
 
 
 @pytest.mark.parametrize("edit, field", [
+    (lambda c: setattr(c.cameras.camera, "renderer_class", "RenderEngineGl"),
+     "cameras.camera.renderer_class"),
     (lambda c: setattr(c.cameras, "mode", "orbiting"), "cameras.mode"),
     (lambda c: setattr(c.cameras, "eyes", []), "cameras.eyes"),
     (lambda c: setattr(c.cameras, "eyes", [[0.4, 0.4]]), r"cameras.eyes\[0\]"),
