@@ -8,7 +8,7 @@ import torch
 
 from corn_drake.cli import main as cli
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import load_frozen_encoder, make_encoder, make_policy_encoder, save_encoder
+from corn_drake.nn.encoder_io import load_frozen_encoder, make_network, make_policy_encoder, save_encoder
 from corn_drake.rl.encoders import MIN_CONTACT_F1, contact_f1, load_encoder
 
 
@@ -28,7 +28,7 @@ def test_an_encoder_below_the_bar_is_refused_naming_it(tmp_path, policy, kind):
     with pytest.raises(InputError, match=r"weak\.pt.*F1 0\.000"):
         load_encoder(policy, weak)
     unrecorded = tmp_path / "old.pt"  # an export from before the record existed
-    torch.save({"kind": kind, "state_dict": make_encoder(kind).state_dict()}, unrecorded)
+    torch.save({"kind": kind, "state_dict": make_network(kind).state_dict()}, unrecorded)
     with pytest.raises(InputError, match="records no pretraining metrics"):
         load_encoder(policy, unrecorded)
 

@@ -15,7 +15,7 @@ import torch
 
 from corn_drake.config import TrainConfig
 from corn_drake.contract import ACTION_DIM, observation_shapes
-from corn_drake.nn.encoder_io import make_encoder
+from corn_drake.nn.encoder_io import make_policy_encoder
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import StepResult
@@ -62,7 +62,7 @@ def _train(kind, tmp_path, monkeypatch, updates=2, rollout_steps=4, num_envs=2):
     cfg.ppo.epochs, cfg.ppo.minibatches = 3, 2
     cfg.ppo.kl_stop_factor = 1e9  # no early stop: every epoch and minibatch runs
     torch.manual_seed(0)
-    encoder = make_encoder(ENCODER_KIND[kind])
+    encoder = make_policy_encoder(ENCODER_KIND[kind])
     calls = []
     encoder.register_forward_pre_hook(lambda module, args: calls.append(1))
     before = [p.detach().clone() for p in encoder.parameters()]
@@ -107,7 +107,7 @@ def test_a_trained_encoder_runs_in_every_minibatch_of_every_epoch(tmp_path, monk
 
 def _agent_and_obs(kind):
     torch.manual_seed(0)
-    encoder = make_encoder(ENCODER_KIND[kind])
+    encoder = make_policy_encoder(ENCODER_KIND[kind])
     calls = []
     encoder.register_forward_pre_hook(lambda module, args: calls.append(1))
     agent = TeacherAgent(kind, encoder, getattr(encoder, "feature_dim", None))

@@ -12,7 +12,7 @@ from corn_drake.contact.pretrain import Pretrainer, augment, hand9, patch_labels
 from corn_drake.contact.runner import generate_dataset
 from corn_drake.contract import ENCODER_INPUT_CENTER, ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import (NormalizedEncoder, load_frozen_encoder, make_encoder,
+from corn_drake.nn.encoder_io import (NormalizedEncoder, load_frozen_encoder, make_network,
                                       save_encoder)
 from corn_drake.nn.geometry import quat_wxyz_to_matrix
 from corn_drake.nn.input_normalization import InputNormalization
@@ -109,7 +109,7 @@ def test_encoder_round_trip_keeps_its_normalisation(tmp_path, kind):
     default), and gives the same output on the same world-frame input."""
     torch.manual_seed(0)
     norm = InputNormalization((0.1, -0.2, 0.5), 0.3)
-    saved = NormalizedEncoder(kind, make_encoder(kind), norm).eval()
+    saved = NormalizedEncoder(kind, make_network(kind), norm).eval()
     save_encoder(tmp_path / "encoder.pt", saved, pretraining={"steps": 3})
     loaded = load_frozen_encoder(tmp_path / "encoder.pt")
     assert loaded.kind == kind and loaded.pretraining == {"steps": 3}
@@ -125,7 +125,7 @@ def test_encoder_round_trip_keeps_its_normalisation(tmp_path, kind):
 
 def test_encoder_saved_before_the_normalisation_was_recorded_loads_with_the_one_used(tmp_path):
     old = tmp_path / "old.pt"
-    torch.save({"kind": "corn", "state_dict": make_encoder("corn").state_dict(),
+    torch.save({"kind": "corn", "state_dict": make_network("corn").state_dict(),
                 "pretraining": None}, old)
     loaded = load_frozen_encoder(old)
     assert loaded.normalization.record() == {"center": pytest.approx(list(ENCODER_INPUT_CENTER)),
@@ -136,7 +136,7 @@ def test_encoder_saved_before_the_normalisation_was_recorded_loads_with_the_one_
                                     {"scale": 0.4}, "0.4"])
 def test_a_malformed_normalisation_record_is_named(tmp_path, record):
     bad = tmp_path / "enc.pt"
-    torch.save({"kind": "corn", "state_dict": make_encoder("corn").state_dict(),
+    torch.save({"kind": "corn", "state_dict": make_network("corn").state_dict(),
                 "normalization": record}, bad)
     with pytest.raises(InputError, match="enc.pt"):
         load_frozen_encoder(bad)

@@ -23,7 +23,7 @@ from corn_drake.nn.input_normalization import InputNormalization
 ENCODER_KINDS = ("corn", "pointnet")
 
 
-def make_encoder(kind: str) -> nn.Module:
+def make_network(kind: str) -> nn.Module:
     """A freshly initialised network of `kind` ("corn" or "pointnet"), without normalisation."""
     from corn_drake.nn.encoder import CORNEncoder
     from corn_drake.nn.pointnet import PointNetEncoder
@@ -57,7 +57,7 @@ class NormalizedEncoder(nn.Module):
 
 def make_policy_encoder(kind: str) -> NormalizedEncoder:
     """A fresh network of `kind` with the default normalisation (trained end to end by PPO)."""
-    return NormalizedEncoder(kind, make_encoder(kind), InputNormalization())
+    return NormalizedEncoder(kind, make_network(kind), InputNormalization())
 
 
 def save_encoder(path: str | Path, encoder: NormalizedEncoder, pretraining: dict | None = None) -> None:
@@ -77,7 +77,7 @@ def load_frozen_encoder(path: str | Path) -> NormalizedEncoder:
         raise MissingInputError(f"encoder checkpoint not found: {path}")
     try:
         state = torch.load(path, weights_only=False)
-        network = make_encoder(state["kind"])
+        network = make_network(state["kind"])
         network.load_state_dict(state["state_dict"])
         # encoder.pt files written before the normalisation was saved hold none: every one of
         # them was pretrained with the contract's ENCODER_INPUT_CENTER / ENCODER_INPUT_SCALE,

@@ -20,6 +20,7 @@ from torch import nn
 
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
 from corn_drake.errors import InputError
+from corn_drake.nn.encoder_io import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RunningMeanStd
@@ -45,6 +46,10 @@ class TeacherAgent(nn.Module):
             raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")
         if kind != "state" and encoder is None:
             raise ValueError(f"policy {kind!r} needs an encoder")
+        if encoder is not None and not isinstance(encoder, NormalizedEncoder):
+            # A bare network would get world-frame points: wrong inputs, no error anywhere.
+            raise TypeError(f"policy {kind!r}: the encoder must be a NormalizedEncoder (the "
+                            f"network with its input normalisation), got {type(encoder).__name__}")
         self.kind = kind
         self.encoder = encoder
         if encoder is not None and self.frozen_encoder:
