@@ -131,6 +131,7 @@ ROWS = [
     _row(f"bench train {BENCH_REPORT} --rollout-steps 0", "--rollout-steps"),
     _row(f"bench train {BENCH_REPORT} --bare-steps 0", "--bare-steps"),
     _row(f"bench train {BENCH_REPORT} --seed -1", "--seed"),
+    _row(f"bench train {BENCH_REPORT} --torch-threads 0", "--torch-threads"),
     _row(f"bench train {BENCH_REPORT} --policy bogus", "--policy"),
     _row(f"bench train {BENCH_REPORT} --task nosuch_task", "--task nosuch_task", "no such task"),
     _row(f"bench train {BENCH_REPORT} --task {{root}}/bad_type.yaml", "{root}/bad_type.yaml",
