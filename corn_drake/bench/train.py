@@ -32,7 +32,7 @@ from __future__ import annotations
 from corn_drake.cli_types import nonnegative_int, positive_int
 
 NAME = "train"
-HELP = "training steps/s of the PPO trainer vs bare physics of the same scene, with a time breakdown"
+HELP = "PPO training steps/s vs bare physics of the same scene, with where the time goes"
 
 FRACTION_KEYS = ("physics", "python_systems", "policy_inference", "ppo_update",
                  "object_switching", "other")
@@ -132,9 +132,9 @@ def run(args) -> dict:
     check_replayable(env_cfg)
     per_update = args.envs * args.rollout_steps
     steps = per_update * args.updates  # timed
-    cfg = TrainConfig(policy=args.policy, total_steps=per_update * (args.warmup_updates + args.updates),
-                      workers=0, envs_per_worker=args.envs, rollout_steps=args.rollout_steps,
-                      seed=args.seed, env=env_cfg)
+    total = per_update * (args.warmup_updates + args.updates)
+    cfg = TrainConfig(policy=args.policy, total_steps=total, workers=0, envs_per_worker=args.envs,
+                      rollout_steps=args.rollout_steps, seed=args.seed, env=env_cfg)
     if args.torch_threads is not None:
         # Measured here on a 2-core machine with another process busy: batch-32 inference
         # took 0.7 s with torch's 2 threads, 0.017 s with 1 (threads waiting on each other).
