@@ -129,6 +129,21 @@ def _run_bare(env, recorded):
     return elapsed, finals
 
 
+def check_replayable(cfg) -> None:
+    """The bare replay rebuilds the scene with the env's object as built: refuses a config whose
+    episodes rescale the object (their torques would be replayed on the wrong size)."""
+    if cfg.randomization.object_radius is not None:
+        raise InputError("the bare-physics replay needs a fixed-size object: set "
+                         "randomization.object_radius to null (no size randomization)")
+
+
+def bare_physics_rate(env, steps: int, seed: int) -> float:
+    """Policy steps/s of the bare plant of `env`'s scene, replaying the torques of `steps`
+    random-action policy steps recorded on `env` (untimed) from the same initial states."""
+    elapsed, _ = _run_bare(env, _record(env, _episodes(env, steps, seed)))
+    return steps / elapsed
+
+
 def _profile_env(env, plans) -> list[str]:
     profiler = cProfile.Profile()
     profiler.enable()
@@ -182,9 +197,7 @@ def run(args) -> dict:
         raise InputError(f"--envs {args.envs} < --workers {args.workers}: "
                          "every Ray worker needs an env")
     env = TeacherEnv(args.config)
-    if env.cfg.randomization.object_radius is not None:
-        raise InputError("bench sim replays torques on a fixed-size object: set "
-                         "randomization.object_radius to null (no size randomization)")
+    check_replayable(env.cfg)
     _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
     plans = _episodes(env, args.steps, args.seed)
     recorded = _record(env, plans)
