@@ -8,16 +8,15 @@ numbers). The unit noise comes in on ``cloud_unit_noise`` / ``goal_unit_noise`` 
 RandomSources, seeded through the context like any other random input
 (diagrams.reseed_random_sources draws fresh seeds per episode).
 hand_state, robot_state, previous_action: as the teacher's. Keys and sizes are the contract's
-(STUDENT_OBS_KEYS, student_observation_shapes).
+(STUDENT_OBS_KEYS, observation_size).
 """
 
 from __future__ import annotations
 
-import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from corn_drake.contract import (GOAL_DIM, POSE9_POSITION, STUDENT_OBS_KEYS, slice_size,
-                                 student_observation_shapes)
+from corn_drake.contract import (GOAL_DIM, POSE9_POSITION, POSITION_DIM, STUDENT_OBS_KEYS,
+                                 observation_size)
 from corn_drake.errors import InputError
 
 # Copied through unchanged from the teacher-side signals of the same name.
@@ -31,10 +30,10 @@ class StudentObservations(LeafSystem):
             if not std >= 0:  # also rejects NaN
                 raise InputError(f"observation.{name} must be >= 0 (metres), got {std}")
         self._cloud_std, self._goal_std = float(cloud_noise_std), float(goal_noise_std)
-        size = {k: int(np.prod(shape)) for k, shape in student_observation_shapes(num_points).items()}
+        size = {k: observation_size(k, num_points) for k in STUDENT_OBS_KEYS}
         self._points = self.DeclareVectorInputPort("points", size["cloud"])
         self._cloud_noise = self.DeclareVectorInputPort("cloud_unit_noise", size["cloud"])
-        self._goal_noise = self.DeclareVectorInputPort("goal_unit_noise", slice_size(POSE9_POSITION))
+        self._goal_noise = self.DeclareVectorInputPort("goal_unit_noise", POSITION_DIM)
         passed = {k: self.DeclareVectorInputPort(k, size[k]) for k in PASSED_THROUGH}
         self._estimated_goal = self.DeclareVectorInputPort("estimated_goal", GOAL_DIM)
         calc = {"cloud": self._calc_cloud, "goal": self._calc_goal}
