@@ -135,17 +135,24 @@ def run(args) -> dict:
     total = per_update * (args.warmup_updates + args.updates)
     cfg = TrainConfig(policy=args.policy, total_steps=total, workers=0, envs_per_worker=args.envs,
                       rollout_steps=args.rollout_steps, seed=args.seed, env=env_cfg)
+    threads_before = torch.get_num_threads()
     if args.torch_threads is not None:
         # Measured here on a 2-core machine with another process busy: batch-32 inference
         # took 0.7 s with torch's 2 threads, 0.017 s with 1 (threads waiting on each other).
         torch.set_num_threads(args.torch_threads)
     timer = PhaseTimer()
-    with tempfile.TemporaryDirectory(prefix="bench_train_") as out:
-        trainer = Trainer(cfg, out, make_encoder(args.policy))
-        instrument(trainer, timer, args.warmup_updates)
-        metrics = trainer.train(progress=False)
-        bare_rate = bare_physics_rate(trainer.envs.envs[0], args.bare_steps, args.seed)
-        scene_object = trainer.envs.envs[0].scene.object_spec.name
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench_train_") as out:
+            trainer = Trainer(cfg, out, make_encoder(args.policy))
+            instrument(trainer, timer, args.warmup_updates)
+            metrics = trainer.train(progress=False)
+            bare_rate = bare_physics_rate(trainer.envs.envs[0], args.bare_steps, args.seed)
+            scene_object = trainer.envs.envs[0].scene.object_spec.name
+        threads_used = torch.get_num_threads()
+    finally:
+        # The setting is process-wide: a caller in the same process (a notebook, the tests)
+        # gets its own back.
+        torch.set_num_threads(threads_before)
     if timer.calls[timer.WINDOW] != args.updates or timer.calls["advance"] != steps:
         raise RuntimeError(f"timed {timer.calls[timer.WINDOW]} updates and "
                            f"{timer.calls['advance']} policy steps, expected {args.updates} and "
@@ -175,7 +182,7 @@ def run(args) -> dict:
         "physics_steps_per_policy_step": trainer.envs.envs[0].clock.substeps,
         "torque_backend": env_cfg.controller.torque_backend,
         "usable_cpus": len(os.sched_getaffinity(0)),
-        "torch_threads": torch.get_num_threads(),
+        "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),
     }
 
