@@ -14,6 +14,8 @@ the reward, and cost ~0.12 ms per policy step.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem, OutputPort
 from pydrake.systems.primitives import Multiplexer, ZeroOrderHold
@@ -28,16 +30,27 @@ from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 STATUS_FIELDS = ("success", "out_of_workspace", "position_error", "orientation_error")
 
 
+_PLANAR = np.array([1.0, 1.0, 0.0])  # the keypoints ignore the object's height
+
+
+def keypoints_at(corners, p, R) -> np.ndarray:
+    """The bounding-box keypoints of an object at (p, R), height dropped (8, 3)."""
+    return corners @ R.T + p * _PLANAR
+
+
+def keypoint_potential_to(goal_points, corners, p, R, k1, k2) -> float:
+    """The object potential at (p, R) towards precomputed goal keypoints (keypoints_at)."""
+    d = keypoints_at(corners, p, R) - goal_points
+    return float(k1 * np.mean(0.995 ** (k2 * np.sqrt(np.einsum("ij,ij->i", d, d)))))
+
+
 def keypoint_potential(corners, p, R, p_goal, R_goal, k1, k2) -> float:
-    planar = np.array([1.0, 1.0, 0.0])
-    cur = corners @ R.T + p * planar
-    goal = corners @ R_goal.T + p_goal * planar
-    return float(np.mean(k1 * 0.995 ** (k2 * np.linalg.norm(cur - goal, axis=1))))
+    return keypoint_potential_to(keypoints_at(corners, p_goal, R_goal), corners, p, R, k1, k2)
 
 
 def pose_errors(p, R, p_goal, R_goal) -> tuple[float, float]:
     """(planar xy distance, rotation angle) between the object and its goal."""
-    return float(np.linalg.norm((p_goal - p)[:2])), rotation_angle(R_goal @ R.T)
+    return math.hypot(p_goal[0] - p[0], p_goal[1] - p[1]), rotation_angle(R_goal @ R.T)
 
 
 # The previous policy step, held as one vector: [object_state, hand_state, energy].
@@ -72,13 +85,13 @@ class TaskReward(LeafSystem):
         g = self._goal_pose.Eval(context)
         return g[POSE7_POSITION], quat_wxyz_to_matrix(g[POSE7_QUATERNION])
 
-    def potentials(self, context, object_state, tool_position) -> tuple[float, float]:
+    def _potentials(self, corners, goal_points, object_state, tool_position) -> tuple[float, float]:
         cfg = self._cfg
         p, R = free_body_pose(object_state)
-        corners = self._keypoints.Eval(context).reshape(-1, POSITION_DIM)
-        phi_obj = keypoint_potential(corners, p, R, *self._goal(context), cfg.keypoint_k1,
-                                     cfg.keypoint_k2)
-        phi_hand = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * float(np.linalg.norm(tool_position - p)))
+        phi_obj = keypoint_potential_to(goal_points, corners, p, R, cfg.keypoint_k1,
+                                        cfg.keypoint_k2)
+        d = tool_position - p
+        phi_hand = cfg.hand_k1 * 0.995 ** (cfg.keypoint_k2 * math.sqrt(float(d @ d)))
         return phi_obj, phi_hand
 
     def status(self, context) -> np.ndarray:
@@ -94,12 +107,17 @@ class TaskReward(LeafSystem):
     def _calc_reward(self, context, output: BasicVector):
         cfg = self._cfg
         prev_object, prev_hand_state, prev_energy = split_previous(self._previous.Eval(context))
-        prev_obj, prev_hand = self.potentials(context, prev_object, prev_hand_state[POSE9_POSITION])
-        phi_obj, phi_hand = self.potentials(context, self._object_state.Eval(context),
-                                            self._hand_state.Eval(context)[POSE9_POSITION])
+        # The goal's keypoints once for both potentials.
+        corners = self._keypoints.Eval(context).reshape(-1, POSITION_DIM)
+        goal_points = keypoints_at(corners, *self._goal(context))
+        prev_obj, prev_hand = self._potentials(corners, goal_points, prev_object,
+                                               prev_hand_state[POSE9_POSITION])
+        phi_obj, phi_hand = self._potentials(corners, goal_points, self._object_state.Eval(context),
+                                             self._hand_state.Eval(context)[POSE9_POSITION])
         success = self._status_port.Eval(context)[0] > 0  # cached: computed once per state
         obj_term = cfg.success_reward if success else cfg.potential_gamma * phi_obj - prev_obj
-        hand_term = np.clip(cfg.potential_gamma * phi_hand - prev_hand, -cfg.hand_clip, cfg.hand_clip)
+        hand_term = min(max(cfg.potential_gamma * phi_hand - prev_hand, -cfg.hand_clip),
+                        cfg.hand_clip)
         energy = (self._energy.Eval(context)[0] - prev_energy) / self._substeps
         output.SetFromVector([obj_term + hand_term - cfg.energy_coef * energy])
 
