@@ -288,6 +288,10 @@ class TrainConfig:
     # lower, since at std 1 every step jitters the hand by most of max_position_delta and a
     # run of a few 100k steps cannot shrink it (Adam moves it ~lr per optimiser step).
     init_log_std: float = 0.0
+    # Torch device of the learner (agent, batched inference, PPO update): "cpu", "cuda" or
+    # "cuda:N". Envs, observations and actions stay numpy on the CPU either way, and
+    # checkpoints hold CPU tensors, so a run may resume on another device.
+    device: str = "cpu"
     ppo: PPOConfig = dc.field(default_factory=PPOConfig)
     env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
 

@@ -136,6 +136,14 @@ ROWS = [
     _row(f"bench train {BENCH_REPORT} --task nosuch_task", "--task nosuch_task", "no such task"),
     _row(f"bench train {BENCH_REPORT} --task {{root}}/bad_type.yaml", "{root}/bad_type.yaml",
          "task.episode_steps"),
+    _row(f"bench scale {BENCH_REPORT} --workers 0", "--workers"),
+    _row(f"bench scale {BENCH_REPORT} --workers 1,x", "--workers"),
+    _row(f"bench scale {BENCH_REPORT} --workers=", "--workers"),
+    _row(f"bench scale {BENCH_REPORT} --workers 1,2,2", "--workers", "2 more than once"),
+    _row(f"bench scale {BENCH_REPORT} --envs-per-worker 0", "--envs-per-worker"),
+    _row(f"bench scale {BENCH_REPORT} --updates 0", "--updates"),
+    _row(f"bench scale {BENCH_REPORT} --device gpu", "--device 'gpu'"),
+    _row(f"bench scale {BENCH_REPORT} --task nosuch_task", "--task nosuch_task", "no such task"),
     _row(f"bench contact-data {BENCH_REPORT} --samples 0", "--samples"),
     _row(f"bench contact-data {BENCH_REPORT} --batch -1", "--batch"),
     _row(f"bench contact-data {BENCH_REPORT} --objects {{root}}/lib_no_id", "{root}/lib_no_id/manifest.json"),
@@ -154,6 +162,9 @@ ROWS = [
     _row("demo --out {root}/demo --bench-steps 0", "--bench-steps"),
     _row("demo --out {root}/demo --seed -1", "--seed"),
 ]
+
+# The learner's device: a malformed one (a device the machine lacks: tests/test_bench_scale.py).
+ROWS += [_row(f"train --device gpu {OUT}", "--device 'gpu'")]
 
 ROWS += [_row(f"train --task {{root}}/{name} {OUT}", "{root}/" + name, detail)
          for name, (_, detail) in BROKEN_CONFIGS.items()]

@@ -6,12 +6,9 @@ recorded torques exactly as `bench sim` does it (bench/sim.py bare_physics_rate)
 trainer's own envs. `train_ratio` = train / bare is the fraction of the physics-only speed that
 training keeps (issue 14 asks >= 0.8).
 
-Rates and shares are measured on the timed updates only: after --warmup-updates untimed ones
-(the first rollout and update pay torch's and the simulators' first calls: 2 s against 0.2 s in
-a probe here), each from entering the rollout to leaving the PPO update (the first reset,
-tensorboard and checkpoints are one-time or per-update bookkeeping outside, as in the trainer's
-own steps_per_s, reported beside it), with timers put on the instances of this run
-(bench/phases.py), so the trainer runs its production code:
+Rates and shares are measured on the timed updates only, after --warmup-updates untimed ones
+(bench/timed_training.py: the windows, and why), the trainer's own steps_per_s reported beside
+them; the timers below go on this run's instances (bench/phases.py):
   physics           the bare plant's time for the policy steps simulated (same-run bare rate
                     x steps; capped at the time in Simulator.AdvanceTo, which it is part of).
                     The Python systems' callbacks run inside AdvanceTo and cannot be timed apart
@@ -29,7 +26,8 @@ own steps_per_s, reported beside it), with timers put on the instances of this r
 
 from __future__ import annotations
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.bench.timed_training import COLLECT, PPO_UPDATE, add_trainer_arguments
+from corn_drake.cli_types import positive_int
 
 NAME = "train"
 HELP = "PPO training steps/s vs bare physics of the same scene, with where the time goes"
@@ -39,49 +37,19 @@ FRACTION_KEYS = ("physics", "python_systems", "policy_inference", "ppo_update",
 
 
 def add_arguments(parser):
-    parser.add_argument("--policy", default="corn", choices=("corn", "e2e", "state", "pn"),
-                        help="policy trained (a randomly initialised encoder: timing only)")
-    parser.add_argument("--task", default="push",
-                        help="task overlay: a name in diagrams/tasks/ or a YAML file")
+    add_trainer_arguments(parser)
     parser.add_argument("--envs", type=positive_int, default=32, help="envs, in this process")
-    parser.add_argument("--updates", type=positive_int, default=3, help="PPO updates timed")
-    parser.add_argument("--warmup-updates", type=nonnegative_int, default=1,
-                        help="PPO updates run first, untimed (first calls into torch and the "
-                             "simulators cost far more than later ones)")
-    parser.add_argument("--rollout-steps", type=positive_int, default=32,
-                        help="policy steps per env and update")
     parser.add_argument("--bare-steps", type=positive_int, default=300,
                         help="policy steps of the bare-physics replay")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--torch-threads", type=positive_int, default=None,
-                        help="torch.set_num_threads for this run (default: torch's own choice, "
-                             "as `train` runs); the report records the count used")
 
 
-def instrument(trainer, timer, warmup_updates: int = 0) -> None:
-    """Timers on this trainer's rollout, env batch, envs and PPO update (instances only); the
-    first `warmup_updates` updates run untimed."""
+def instrument_envs(trainer, timer) -> None:
+    """Timers on this trainer's env batch and envs (instances only), inside the update windows
+    of timed_training.time_updates."""
     from corn_drake.bench.phases import time_simulator
 
     batch = trainer.envs
-    original_collect, original_update = trainer._collect, trainer.ppo.update
     original_begin = batch._begin_episode
-
-    started = [0]  # updates begun
-
-    def collect(*args, **kwargs):
-        started[0] += 1
-        if started[0] > warmup_updates:
-            timer.open_window()  # closed when this update's PPO step returns
-        with timer.phase("collect"):
-            return original_collect(*args, **kwargs)
-
-    def update(*args, **kwargs):
-        with timer.phase("ppo_update"):
-            result = original_update(*args, **kwargs)
-        if timer.in_window:
-            timer.close_window()
-        return result
 
     def begin_episode(slot):
         with timer.phase("object_switching"):
@@ -89,7 +57,7 @@ def instrument(trainer, timer, warmup_updates: int = 0) -> None:
         time_simulator(batch.envs[slot], timer, "advance")  # an env swapped in is timed too
         return obs
 
-    trainer._collect, trainer.ppo.update, batch._begin_episode = collect, update, begin_episode
+    batch._begin_episode = begin_episode
     timer.wrap(batch, "step", "env_step")
     for env in batch.envs:
         time_simulator(env, timer, "advance")
@@ -103,8 +71,8 @@ def breakdown(timer, bare_rate: float) -> tuple[dict, dict]:
     seconds = {
         "physics": physics,
         "python_systems": s["advance"] - physics + s["env_step"],
-        "policy_inference": s["collect"],
-        "ppo_update": s["ppo_update"],
+        "policy_inference": s[COLLECT],
+        "ppo_update": s[PPO_UPDATE],
         "object_switching": s["object_switching"],
         "other": s[timer.WINDOW],
     }
@@ -116,15 +84,13 @@ def breakdown(timer, bare_rate: float) -> tuple[dict, dict]:
 
 def run(args) -> dict:
     import os
-    import tempfile
 
     import torch
 
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.sim import bare_physics_rate, check_replayable
-    from corn_drake.config import TrainConfig
-    from corn_drake.rl.encoders import make_encoder
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.bench.timed_training import (check_counts, run_trainer, torch_threads,
+                                                 train_config, trainer_logged_steps_per_s)
     from corn_drake.run_config import load_env_config
 
     env_cfg = load_env_config(args.task)
@@ -132,31 +98,15 @@ def run(args) -> dict:
     check_replayable(env_cfg)
     per_update = args.envs * args.rollout_steps
     steps = per_update * args.updates  # timed
-    total = per_update * (args.warmup_updates + args.updates)
-    cfg = TrainConfig(policy=args.policy, total_steps=total, workers=0, envs_per_worker=args.envs,
-                      rollout_steps=args.rollout_steps, seed=args.seed, env=env_cfg)
-    threads_before = torch.get_num_threads()
-    if args.torch_threads is not None:
-        # Measured here on a 2-core machine with another process busy: batch-32 inference
-        # took 0.7 s with torch's 2 threads, 0.017 s with 1 (threads waiting on each other).
-        torch.set_num_threads(args.torch_threads)
+    cfg = train_config(args, env_cfg, workers=0, envs_per_worker=args.envs)
     timer = PhaseTimer()
-    try:
-        with tempfile.TemporaryDirectory(prefix="bench_train_") as out:
-            trainer = Trainer(cfg, out, make_encoder(args.policy))
-            instrument(trainer, timer, args.warmup_updates)
-            metrics = trainer.train(progress=False)
-            bare_rate = bare_physics_rate(trainer.envs.envs[0], args.bare_steps, args.seed)
-            scene_object = trainer.envs.envs[0].scene.object_spec.name
+    with torch_threads(args.torch_threads):
+        trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
+                                       instrument=lambda t: instrument_envs(t, timer))
+        bare_rate = bare_physics_rate(trainer.envs.envs[0], args.bare_steps, args.seed)
         threads_used = torch.get_num_threads()
-    finally:
-        # The setting is process-wide: a caller in the same process (a notebook, the tests)
-        # gets its own back.
-        torch.set_num_threads(threads_before)
-    if timer.calls[timer.WINDOW] != args.updates or timer.calls["advance"] != steps:
-        raise RuntimeError(f"timed {timer.calls[timer.WINDOW]} updates and "
-                           f"{timer.calls['advance']} policy steps, expected {args.updates} and "
-                           f"{steps}: the trainer no longer runs through the timed methods")
+    check_counts(timer, {timer.WINDOW: args.updates, "advance": steps})
+    scene_object = trainer.envs.envs[0].scene.object_spec.name
     train_rate = steps / timer.window_seconds
     fractions, seconds = breakdown(timer, bare_rate)
     history = metrics["history"][args.warmup_updates:]  # the timed updates
@@ -167,7 +117,7 @@ def run(args) -> dict:
         "time_fractions": fractions,
         "time_s": seconds,
         # The trainer's own figure (its per-update timer), as a cross-check of the window's.
-        "trainer_logged_steps_per_s": steps / sum(per_update / r["steps_per_s"] for r in history),
+        "trainer_logged_steps_per_s": trainer_logged_steps_per_s(history, per_update),
         "policy": args.policy,
         "task": env_cfg.task.name,
         "object": scene_object,
@@ -185,4 +135,3 @@ def run(args) -> dict:
         "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),
     }
-

@@ -3,10 +3,11 @@
 A new run's config is built in layers (corn_drake/run_config.py): the base diagram, the
 `--task` overlay, then the shortcut flags and `--set KEY=VALUE` overrides; the result is
 written into OUT/config.yaml. Training into an existing run resumes it from that file: `--out`
-is all it needs (`--resume` makes that a requirement, so a mistyped folder is not a new run). An argument given on a resume is an override of the recorded config, checked
-before anything is written: --steps may grow, --ray-address (and checkpoint_every) may change;
-any other difference is refused, naming the argument and both values. What an accepted
-override changes is printed.
+is all it needs (`--resume` makes that a requirement, so a mistyped folder is not a new run).
+An argument given on a resume is an override of the recorded config, checked before anything
+is written: --steps may grow, --ray-address, --device (and checkpoint_every) may change; any
+other difference is refused, naming the argument and both values. What an accepted override
+changes is printed.
 
 OUT is locked while the command runs (a second `train` into it refuses).
 """
@@ -26,11 +27,12 @@ SHORTCUTS = {"policy": "policy", "steps": "total_steps", "workers": "workers",
              "envs_per_worker": "envs_per_worker", "rollout_steps": "rollout_steps",
              "minibatches": "ppo.minibatches", "init_log_std": "init_log_std",
              "encoder": "encoder", "allow_weak_encoder": "allow_weak_encoder", "seed": "seed",
-             "ray_address": "ray_address"}
+             "ray_address": "ray_address", "device": "device"}
 # A resumed run may change only these config fields: total_steps may grow (extends the run);
-# ray_address only says where the workers run; checkpoint_every is not an output.
+# ray_address only says where the workers run, device where the learner's tensors live
+# (checkpoints hold CPU tensors); checkpoint_every is not an output.
 RESUME_MAY_GROW = ("total_steps",)
-RESUME_MAY_CHANGE = ("ray_address", "checkpoint_every")
+RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every")
 
 
 def add_arguments(parser):
@@ -69,6 +71,9 @@ def add_arguments(parser):
     parser.add_argument("--ray-address", default=None,
                         help="connect to a Ray cluster instead of a local one")
     parser.add_argument("--seed", type=nonnegative_int, default=None, help="default: 0")
+    parser.add_argument("--device", default=None,
+                        help="torch device of the agent, its batched inference and the PPO "
+                             "update: cpu (default), cuda or cuda:N; the envs run on the CPU")
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -97,6 +102,7 @@ def requested_config(args, recorded):
 
 def run(args) -> int:
     from corn_drake.errors import InputError
+    from corn_drake.rl.device import training_device
     from corn_drake.rl.encoders import load_encoder
     from corn_drake.rl.trainer import Trainer
     from corn_drake.run_config import (config_changes, load_run_config, run_config_path,
@@ -117,6 +123,7 @@ def run(args) -> int:
 
             library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
         cfg.env.check()  # a value no episode can be built from is refused before any write
+        training_device(cfg.device, argument_of_field("device"))  # e.g. cuda on a CPU machine
         if recorded is not None:
             refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,
                                   ignore=RESUME_MAY_CHANGE, name=argument_of_field)

@@ -32,9 +32,12 @@ POLICY_KINDS = ("corn", "e2e", "state", "pn")
 Encoder = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 
-def obs_to_tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-    """Batched numpy observations -> float32 tensors, with the context assembled."""
-    t = {k: torch.as_tensor(np.asarray(v), dtype=torch.float32) for k, v in obs.items()}
+def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str | None = None
+                   ) -> dict[str, torch.Tensor]:
+    """Batched numpy observations -> float32 tensors on `device` (default: the CPU), with the
+    context assembled."""
+    t = {k: torch.as_tensor(np.asarray(v), dtype=torch.float32, device=device)
+         for k, v in obs.items()}
     t["context"] = torch.cat([t[k] for k in CONTEXT_KEYS], dim=-1)
     return t
 
@@ -118,9 +121,10 @@ class TeacherAgent(nn.Module):
         single = np.asarray(obs["goal"]).ndim == 1
         batch = {k: np.asarray(v)[None] for k, v in obs.items()} if single else obs
         with torch.no_grad():
-            mu, _ = self(obs_to_tensors(batch))
+            mu, _ = self(obs_to_tensors(batch, self.log_std.device))
             if unit_noise is not None:
-                noise = torch.as_tensor(np.asarray(unit_noise), dtype=mu.dtype).reshape(mu.shape)
+                noise = torch.as_tensor(np.asarray(unit_noise), dtype=mu.dtype,
+                                        device=mu.device).reshape(mu.shape)
                 mu = mu + self.log_std.exp() * noise
-        action = mu.clamp(-1, 1).numpy().astype(np.float64)
+        action = mu.clamp(-1, 1).cpu().numpy().astype(np.float64)
         return action[0] if single else action

@@ -99,7 +99,8 @@ class PPO:
         stats = {"minibatches": 0, "early_stop": 0.0}
         last: dict[str, torch.Tensor] = {}
         for _ in range(c.epochs):
-            order = torch.randperm(n, generator=generator)
+            # Drawn on the CPU generator (the run's RNG stream on any device), then moved.
+            order = torch.randperm(n, generator=generator).to(actions.device)
             for idx in order.chunk(c.minibatches):
                 mb_obs = {k: v[idx] for k, v in obs.items()}
                 last = self.losses(mb_obs, actions[idx], old_log_prob[idx], advantages[idx],
@@ -143,5 +144,7 @@ def sample_actions(policy: Callable, obs: Obs, generator: torch.Generator | None
     with torch.no_grad():
         mu, value = policy(obs)
         std = policy.log_std.exp()
-        actions = mu + std * torch.randn(mu.shape, generator=generator)
+        # The noise comes from the CPU generator whatever the device: a run draws the same
+        # stream on cpu and cuda, and its checkpoint holds that generator's state.
+        actions = mu + std * torch.randn(mu.shape, generator=generator).to(mu.device)
         return actions, gaussian_log_prob(mu, policy.log_std, actions), value

@@ -6,6 +6,10 @@ checkpoints/last.pt (prev.pt if last.pt is unreadable) at the same update with t
 optimizer, normalisers and RNG state (environments start fresh episodes, continuing the rounds
 over the library's train objects). metrics.json's episodes_per_object counts the finished
 training episodes of each object over the whole run.
+
+`cfg.device` holds the agent, batched inference, the rollout buffers and the PPO update; the
+envs step numpy arrays on the CPU, and the reward scaler and random generators stay there too
+(the same random streams on any device). Checkpoints hold CPU tensors only.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from corn_drake.config import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 from corn_drake.rl.vec_env import EnvBatch, EnvFactory
@@ -42,12 +47,14 @@ def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> 
 class Trainer:
     def __init__(self, cfg: TrainConfig, out: str | Path, encoder: torch.nn.Module | None = None):
         self.cfg, self.out = cfg, Path(out)
+        self.device = training_device(cfg.device)  # a device this machine lacks: InputError
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.agent = TeacherAgent(cfg.policy, encoder)
         with torch.no_grad():
             self.agent.log_std.fill_(cfg.init_log_std)
+        self.agent.to(self.device)  # before the optimiser takes its parameters
         self.ppo = PPO(self.agent, cfg.ppo)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         self.reward_scaler = RewardScaler(n_envs, cfg.ppo.gamma)
@@ -75,7 +82,8 @@ class Trainer:
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
-        state = {"agent": self.agent.state_dict(), "ppo": self.ppo.state_dict(),
+        # CPU tensors (loaded with map_location="cpu"): a run resumes on any device.
+        state = {"agent": to_cpu(self.agent.state_dict()), "ppo": to_cpu(self.ppo.state_dict()),
                  "reward_scaler": self.reward_scaler.state_dict(),
                  "global_step": self.global_step, "update_index": self.update_index,
                  "history": self.history, "recent_episodes": self.recent_episodes,
@@ -105,34 +113,37 @@ class Trainer:
 
     # --- one update --------------------------------------------------------------------------
     def _collect(self, obs_np):
-        T, agent = self.cfg.rollout_steps, self.agent
+        T, agent, device = self.cfg.rollout_steps, self.agent, self.device
         buf = {k: [] for k in ("obs", "actions", "logp", "values", "rewards", "terminated",
                                 "truncated", "final_values")}
         episodes, sim_errors = [], 0
         for _ in range(T):
-            obs = _frozen_feature_cache(agent, obs_to_tensors(obs_np))
+            obs = _frozen_feature_cache(agent, obs_to_tensors(obs_np, device))
             actions, logp, values = sample_actions(agent, obs, self.generator)
-            step = self.envs.step(actions.numpy())
-            final_values = torch.zeros(len(step.rewards))
+            step = self.envs.step(actions.cpu().numpy())
+            final_values = torch.zeros(len(step.rewards), device=device)
             if step.final_obs:
                 idx = sorted(step.final_obs)
                 final = obs_to_tensors({k: np.stack([step.final_obs[i][k] for i in idx])
-                                        for k in step.final_obs[idx[0]]})
+                                        for k in step.final_obs[idx[0]]}, device)
                 with torch.no_grad():
                     final_values[idx] = agent(_frozen_feature_cache(agent, final))[1]
             rewards = torch.as_tensor(step.rewards, dtype=torch.float32)
             dones = torch.as_tensor(step.terminated | step.truncated)
+            scaled = self.reward_scaler(rewards, dones).float().to(device)
             for key, value in (("obs", obs), ("actions", actions), ("logp", logp),
-                               ("values", values), ("rewards", self.reward_scaler(rewards, dones).float()),
-                               ("terminated", torch.as_tensor(step.terminated, dtype=torch.float32)),
-                               ("truncated", torch.as_tensor(step.truncated, dtype=torch.float32)),
+                               ("values", values), ("rewards", scaled),
+                               ("terminated", torch.as_tensor(step.terminated, dtype=torch.float32,
+                                                              device=device)),
+                               ("truncated", torch.as_tensor(step.truncated, dtype=torch.float32,
+                                                             device=device)),
                                ("final_values", final_values)):
                 buf[key].append(value)
             episodes += step.episode_stats
             sim_errors += step.sim_errors
             obs_np = step.obs
         with torch.no_grad():
-            last_values = agent(_frozen_feature_cache(agent, obs_to_tensors(obs_np)))[1]
+            last_values = agent(_frozen_feature_cache(agent, obs_to_tensors(obs_np, device)))[1]
         return buf, last_values, obs_np, episodes, sim_errors
 
     def train(self, progress: bool = True) -> dict:
@@ -198,6 +209,21 @@ class Trainer:
         write_json(self.out / "metrics.json", metrics)
         plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics
+
+
+def to_cpu(state):
+    """`state` (nested dicts / lists / tuples of tensors and plain values) with every tensor
+    moved to the CPU."""
+    if isinstance(state, torch.Tensor):
+        return state.cpu()
+    if isinstance(state, dict):
+        moved = type(state)((k, to_cpu(v)) for k, v in state.items())
+        if hasattr(state, "_metadata"):  # a module state_dict's version record, used on load
+            moved._metadata = state._metadata
+        return moved
+    if isinstance(state, (list, tuple)):
+        return type(state)(to_cpu(v) for v in state)
+    return state
 
 
 def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> None:
