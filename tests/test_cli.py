@@ -19,11 +19,31 @@ def test_bench_sim_writes_report_with_baseline(tmp_path):
     assert main(["bench", "sim", "--report", str(report), "--steps", "30"]) == 0
     data = json.loads(report.read_text())
     results = data["results"]
-    for key in ("policy_steps_per_s", "bare_physics_policy_steps_per_s", "overhead_ratio"):
+    for key in ("policy_steps_per_s", "bare_physics_policy_steps_per_s", "overhead_ratio",
+                "physics_speedup"):
         assert results[key] > 0
     assert abs(results["overhead_ratio"] - results["bare_physics_policy_steps_per_s"]
                / results["policy_steps_per_s"]) < 1e-9
+    assert abs(results["physics_speedup"] - results["configured_bare_physics_policy_steps_per_s"]
+               / results["baseline_bare_physics_policy_steps_per_s"]) < 1e-9
+    # The baseline is the previous defaults' file, read back as settings.
+    assert results["baseline_physics"].endswith("previous_default.yaml")
+    assert results["baseline_physics_settings"]["discrete_contact_approximation"] == "sap"
     assert "cpu_count" in data["machine"]
+
+
+def test_bench_sim_compares_against_another_physics_overlay(tmp_path):
+    """A baseline overlay with other contact settings is simulated with them (the lagged
+    approximation here), and the report names both settings."""
+    overlay = tmp_path / "lagged.yaml"
+    overlay.write_text("scene: {physics: {plant: {discrete_contact_approximation: lagged}}}\n")
+    report = tmp_path / "sim.json"
+    assert main(["bench", "sim", "--report", str(report), "--steps", "20",
+                 "--baseline-physics", str(overlay)]) == 0
+    results = json.loads(report.read_text())["results"]
+    assert results["baseline_physics_settings"]["discrete_contact_approximation"] == "lagged"
+    assert results["physics"]["discrete_contact_approximation"] == "sap"
+    assert results["physics_speedup"] > 0
 
 
 def test_train_then_evaluate_writes_the_report_keys(tmp_path):

@@ -22,9 +22,12 @@ import time
 
 import numpy as np
 
+from corn_drake import DIAGRAMS_DIR
 from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.contract import ACTION_DIM
 from corn_drake.errors import InputError
+
+PREVIOUS_PHYSICS = DIAGRAMS_DIR / "physics" / "previous_default.yaml"
 
 NAME = "sim"
 HELP = "TeacherEnv policy steps/s with random actions vs bare physics of the same plant"
@@ -41,6 +44,10 @@ def add_arguments(parser):
                         help="envs in the policy-in-the-loop runs")
     parser.add_argument("--workers", type=positive_int, default=2,
                         help="Ray workers in the Ray run")
+    parser.add_argument("--baseline-physics", default=str(PREVIOUS_PHYSICS),
+                        help="teacher-diagram overlay with the contact settings to compare the "
+                             "configured physics against (physics_speedup); default: the "
+                             "settings before the throughput work")
 
 
 def _episodes(env, steps: int, seed: int):
@@ -190,6 +197,49 @@ def _policy_results(args, cfg) -> dict:
             "ray_ratio": remote / local}
 
 
+def baseline_physics_config(cfg, overlay):
+    """`cfg` with `overlay` (a teacher-diagram YAML, e.g. the previous physics defaults) on top;
+    a missing or bad file is an InputError naming it."""
+    import copy
+
+    from corn_drake.config import TeacherDiagramConfig, load_config
+
+    base_cfg = load_config(overlay, TeacherDiagramConfig, defaults=copy.deepcopy(cfg))
+    base_cfg.check()
+    check_replayable(base_cfg)
+    return base_cfg
+
+
+def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -> dict:
+    """Bare-physics policy steps/s of `env`'s physics and of the same scene under `base_cfg`'s,
+    each replaying its own recording of the same action plans; the two alternate `repeats`
+    times and the best of each is kept (the least disturbed by other load)."""
+    from corn_drake.rl.env import TeacherEnv
+
+    baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
+    plans = _episodes(env, steps, seed)
+    recorded = {"configured": (env, _record(env, plans)),
+                "baseline": (baseline, _record(baseline, plans))}
+    rates = {name: 0.0 for name in recorded}
+    for _ in range(repeats):
+        for name, (e, rec) in recorded.items():
+            rates[name] = max(rates[name], steps / _run_bare(e, rec)[0])
+    return {"physics_speedup": rates["configured"] / rates["baseline"],
+            "configured_bare_physics_policy_steps_per_s": rates["configured"],
+            "baseline_bare_physics_policy_steps_per_s": rates["baseline"],
+            "physics": _physics_summary(env.cfg.scene.physics),
+            "baseline_physics_settings": _physics_summary(base_cfg.scene.physics)}
+
+
+def _physics_summary(physics) -> dict:
+    plant = physics.plant
+    return {"time_step": plant.time_step, "contact_model": plant.contact_model,
+            "discrete_contact_approximation": plant.discrete_contact_approximation,
+            "compliant_body": physics.compliant_body,
+            "table_hydroelastic_modulus": physics.table_hydroelastic_modulus,
+            "table_resolution_hint": physics.table_resolution_hint}
+
+
 def run(args) -> dict:
     from corn_drake.rl.env import TeacherEnv
 
@@ -198,6 +248,7 @@ def run(args) -> dict:
                          "every Ray worker needs an env")
     env = TeacherEnv(args.config)
     check_replayable(env.cfg)
+    base_cfg = baseline_physics_config(env.cfg, args.baseline_physics)  # its errors come first
     _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
     plans = _episodes(env, args.steps, args.seed)
     recorded = _record(env, plans)
@@ -221,6 +272,8 @@ def run(args) -> dict:
         "replay_max_position_error": replay_error,
         "determinism_max_state_error": determinism_error,
         "profile_top_tottime": _profile_env(env, _episodes(env, min(args.steps, 200), args.seed + 2)),
+        "baseline_physics": str(args.baseline_physics),
+        **physics_comparison(env, base_cfg, args.steps, args.seed),
     }
     if args.policy:
         extra = _policy_results(args, env.cfg)
