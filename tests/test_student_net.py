@@ -223,3 +223,16 @@ def test_wrong_checkpoints_and_groups_are_refused_naming_them(tmp_path):
     save_encoder(good, _custom_encoder())
     with pytest.raises(InputError, match="tokeniser"):
         student_from_encoder(good, frozen=("tokeniser",))
+
+
+def test_a_students_state_dict_restores_it_whole(tmp_path):
+    # What a DAgger checkpoint relies on: a fresh StudentPolicy loading a trained one's
+    # state_dict acts the same, the encoder's input normalisation and token statistics included.
+    save_encoder(tmp_path / "encoder.pt", _custom_encoder())
+    trained = student_from_encoder(tmp_path / "encoder.pt").eval()
+    trained.set_token_statistics_from_context(torch.randn(CONTEXT_DIM), torch.rand(CONTEXT_DIM))
+    restored = StudentPolicy().eval()
+    restored.load_state_dict(trained.state_dict())
+    assert restored.encoder.normalization.record() == trained.encoder.normalization.record()
+    obs = _obs(1, 3)
+    assert torch.equal(restored(obs).mean, trained(obs).mean)
