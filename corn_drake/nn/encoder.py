@@ -56,21 +56,29 @@ class CORNEncoder(nn.Module):
         self.layers = nn.ModuleList(EncoderLayer(dim, heads, ffn, dropout) for _ in range(layers))
         self.norm = nn.LayerNorm(dim, eps=1e-6)
 
-    def forward(self, points: torch.Tensor, hand: torch.Tensor, indices=None) -> torch.Tensor:
+    def forward(self, points: torch.Tensor, hand: torch.Tensor, indices=None,
+                extra_tokens: torch.Tensor | None = None) -> torch.Tensor:
         """points (B, N, 3), hand (B, 9) -> tokens (B, 1 + G, D), hand token first.
 
         `indices` = patch_indices(points) may be passed in when known (a cloud moved rigidly).
+        `extra_tokens` (B, K, D), when given, enter the transformer between the hand token and
+        the patch tokens (the student's task tokens): the output is then (B, 1 + K + G, D).
         """
         if hand.shape != (points.shape[0], self.hand.in_features):
             # Named here: torch would only report a matmul or cat size mismatch.
             raise ValueError(f"hand must be (B, {self.hand.in_features}) with B = "
                              f"{points.shape[0]} clouds, got {tuple(hand.shape)}")
+        if extra_tokens is not None and (extra_tokens.ndim != 3 or extra_tokens.shape[2] != self.dim
+                                         or extra_tokens.shape[0] != points.shape[0]):
+            raise ValueError(f"extra_tokens must be (B, K, {self.dim}) with B = {points.shape[0]} "
+                             f"clouds, got {tuple(extra_tokens.shape)}")
         center_idx, knn_idx = indices if indices is not None else patch_indices(
             points, self.num_patches, self.patch_size)
         centers, patches = group(points, center_idx, knn_idx)
         tokens = self.tokenizer(patches.flatten(2))
         tokens = tokens + torch.cat([centers, self.position(centers)], dim=-1)
-        x = torch.cat([self.hand(hand).unsqueeze(1), tokens], dim=1)
+        extra = [] if extra_tokens is None else [extra_tokens]
+        x = torch.cat([self.hand(hand).unsqueeze(1), *extra, tokens], dim=1)
         for layer in self.layers:
             x = layer(x)
         return self.norm(x)
