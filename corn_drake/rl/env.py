@@ -1,9 +1,12 @@
-"""TeacherEnv: a gymnasium adapter over the teacher rollout diagram.
+"""Gymnasium adapters over the rollout diagrams: one env base, one observation set per env.
 
-One Simulator is built once and reused. reset() draws an Episode (corn_drake/tasks/episode.py)
-and writes it into the context (TeacherDiagram.write_episode); step() fixes the action input
-port and advances one policy period. Whole episodes with a policy, recordings and reports are
-corn_drake/evaluation.py's job.
+DiagramEnv holds what every rollout diagram shares (the teacher's systems inside it): one
+Simulator built once and reused; reset() draws an Episode (corn_drake/tasks/episode.py) and
+writes it into the context (TeacherDiagram.write_episode); step() fixes the action input port,
+advances one policy period and reads reward, status and termination. What the policy sees is
+the subclass's: TeacherEnv returns the teacher's privileged observation (TeacherObservationReader);
+corn_drake/rl/student_env.py's StudentEnv returns the student's and the teacher's of the same
+state. Whole episodes with a policy, recordings and reports are corn_drake/evaluation.py's job.
 """
 
 from __future__ import annotations
@@ -23,43 +26,63 @@ from corn_drake.tasks.episode import Episode, sample_episode
 from corn_drake.timing import clock_of
 
 
-class TeacherEnv(gym.Env):
+def zeros_like_space(space: gym.spaces.Space):
+    """Zeros with the shapes of a (possibly nested) Dict of Boxes."""
+    if isinstance(space, gym.spaces.Dict):
+        return {k: zeros_like_space(s) for k, s in space.items()}
+    return np.zeros(space.shape, space.dtype)
+
+
+class TeacherObservationReader:
+    """The teacher's privileged observation (OBS_KEYS) from the diagram holding `teacher`."""
+
+    def __init__(self, teacher: TeacherDiagram):
+        self._port = teacher.diagram.GetOutputPort("obs.observation")
+        self._layout = teacher.observations.layout
+        self.space = gym.spaces.Dict({k: gym.spaces.Box(-np.inf, np.inf, self._layout.shapes[k],
+                                                        np.float32) for k in OBS_KEYS})
+
+    def read(self, context) -> dict[str, np.ndarray]:
+        return self._layout.unpack(self._port.Eval(context))
+
+
+class DiagramEnv(gym.Env):
+    """The env base: subclasses set `observation_space` and define `_observation()`, and may add
+    to the info dicts with `_extra_info()`."""
+
     metadata = {"render_modes": []}
 
-    def __init__(self, config: TeacherDiagramConfig | str | Path | None = None,
-                 spec: ObjectSpec | None = None, meshcat=None, agent=None,
-                 stochastic_policy: bool = False):
-        """With `agent`, a PolicySystem inside the diagram chooses the actions (the evaluation
-        diagram) and step() takes none; with `stochastic_policy` it samples them (a RandomSource
-        the episode's seed reseeds) instead of taking the mean."""
-        if config is None or isinstance(config, (str, Path)):
-            config = load_teacher_config(config)
-        config.check()
-        self.cfg = config
-        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent,
-                                                             stochastic_policy)
-        if len(self.handles.scene.object_spec.stable_poses) == 0:
-            raise ValueError(f"object {self.handles.scene.object_spec.name} has no stable poses")
+    def __init__(self, teacher: TeacherDiagram, meshcat=None, agent_acts: bool = False):
+        """`teacher`: the teacher's handles inside the built diagram (teacher.diagram is the
+        whole diagram); `agent_acts`: a PolicySystem inside the diagram chooses the actions."""
+        if len(teacher.scene.object_spec.stable_poses) == 0:
+            raise ValueError(f"object {teacher.scene.object_spec.name} has no stable poses")
+        self._teacher = teacher
+        self.teacher_cfg: TeacherDiagramConfig = teacher.config
         self.meshcat = meshcat
-        self.diagram = self.handles.diagram
-        self.scene = self.handles.scene
+        self.diagram = teacher.diagram
+        self.scene = teacher.scene
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
         self._plant_context = self.scene.plant.GetMyMutableContextFromRoot(self.context)
-        self._action_port = (self.diagram.GetInputPort("controller.action")
-                             if agent is None else None)
-        self._obs_port = self.diagram.GetOutputPort("obs.observation")
-        self._layout = self.handles.observations.layout
+        self._action_port = None if agent_acts else self.diagram.GetInputPort("controller.action")
         self._reward_port = self.diagram.GetOutputPort("task.reward")
         self._status_port = self.diagram.GetOutputPort("task.status")
-        self.clock = clock_of(config.scene.physics)
-        self.observation_space = gym.spaces.Dict(
-            {k: gym.spaces.Box(-np.inf, np.inf, self._layout.shapes[k], np.float32) for k in OBS_KEYS})
+        self.clock = clock_of(self.teacher_cfg.scene.physics)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         self._steps = 0
-        self._np_random = np.random.default_rng(config.seed)
+        self._np_random = np.random.default_rng(self.teacher_cfg.seed)
         self.episode: Episode | None = None  # the current episode's draws (set by reset)
 
+    # --- what subclasses define ------------------------------------------------------------
+    def _observation(self):
+        raise NotImplementedError
+
+    def _extra_info(self) -> dict:
+        """Entries added to reset's and every (successful) step's info."""
+        return {}
+
+    # --- shared ------------------------------------------------------------------------------
     @property
     def plant_context(self):
         """The plant's context inside the simulator's root context."""
@@ -75,16 +98,14 @@ class TeacherEnv(gym.Env):
         if seed is not None:
             self._np_random = np.random.default_rng(seed)
         rng = self._np_random
-        self.episode = sample_episode(self.cfg, self.scene, self.handles.observations.tool_pose, rng)
-        self.handles.write_episode(self.context, self.episode, rng)
+        self.episode = sample_episode(self.teacher_cfg, self.scene,
+                                      self._teacher.observations.tool_pose, rng)
+        self._teacher.write_episode(self.context, self.episode, rng)
         if self._action_port is not None:
             self._action_port.FixValue(self.context, np.zeros(ACTION_DIM))
         self.simulator.Initialize()
         self._steps = 0
-        return self._observation(), {"status": self._status()}
-
-    def _observation(self) -> dict[str, np.ndarray]:
-        return self._layout.unpack(self._obs_port.Eval(self.context))
+        return self._observation(), {"status": self._status(), **self._extra_info()}
 
     def _status(self) -> dict[str, float]:
         return dict(zip(STATUS_FIELDS, self._status_port.Eval(self.context).tolist()))
@@ -112,11 +133,34 @@ class TeacherEnv(gym.Env):
             # from V(final observation), and the state behind this one is meaningless. The
             # zero observation only keeps the shapes; reset() before stepping again.
             info.setdefault("sim_error", "non-finite state after step")
-            obs = {k: np.zeros(sp.shape, np.float32) for k, sp in self.observation_space.items()}
-            return obs, 0.0, True, False, info
+            return zeros_like_space(self.observation_space), 0.0, True, False, info
         status = self._status()
         info["status"] = status
+        info.update(self._extra_info())
         reward = float(self._reward_port.Eval(self.context)[0])
         terminated = bool(status["success"] > 0 or status["out_of_workspace"] > 0)
-        truncated = self._steps >= self.cfg.task.episode_steps and not terminated
+        truncated = self._steps >= self.teacher_cfg.task.episode_steps and not terminated
         return self._observation(), reward, terminated, truncated, info
+
+
+class TeacherEnv(DiagramEnv):
+    """The teacher rollout diagram; observations: the privileged OBS_KEYS."""
+
+    def __init__(self, config: TeacherDiagramConfig | str | Path | None = None,
+                 spec: ObjectSpec | None = None, meshcat=None, agent=None,
+                 stochastic_policy: bool = False):
+        """With `agent`, a PolicySystem inside the diagram chooses the actions (the evaluation
+        diagram) and step() takes none; with `stochastic_policy` it samples them (a RandomSource
+        the episode's seed reseeds) instead of taking the mean."""
+        if config is None or isinstance(config, (str, Path)):
+            config = load_teacher_config(config)
+        config.check()
+        self.cfg = config
+        self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent,
+                                                             stochastic_policy)
+        super().__init__(self.handles, meshcat, agent_acts=agent is not None)
+        self._teacher_obs = TeacherObservationReader(self.handles)
+        self.observation_space = self._teacher_obs.space
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        return self._teacher_obs.read(self.context)
