@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import ray
 
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult
+from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
 
 
 @ray.remote(num_cpus=1)
@@ -93,7 +93,7 @@ class RayEnvBatch:
 
     def reset(self) -> dict[str, np.ndarray]:
         parts = ray.get([w.reset.remote() for w in self.workers])
-        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        return concat_obs(parts)
 
     def step(self, actions: np.ndarray) -> StepResult:
         E = self.envs_per_worker
@@ -121,7 +121,7 @@ class RayEnvBatch:
 def _concat(results: list[StepResult], per_worker: int) -> StepResult:
     final_obs = {i * per_worker + j: o for i, r in enumerate(results) for j, o in r.final_obs.items()}
     return StepResult(
-        obs={k: np.concatenate([r.obs[k] for r in results]) for k in results[0].obs},
+        obs=concat_obs([r.obs for r in results]),
         rewards=np.concatenate([r.rewards for r in results]),
         terminated=np.concatenate([r.terminated for r in results]),
         truncated=np.concatenate([r.truncated for r in results]),

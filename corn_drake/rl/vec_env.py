@@ -1,4 +1,5 @@
-"""Batches of TeacherEnvs stepped together, in-process (EnvBatch) or on Ray actors (ray_workers).
+"""Batches of envs (TeacherEnvs, or StudentEnvs for a student config) stepped together,
+in-process (EnvBatch) or on Ray actors (ray_workers).
 
 Auto-reset: an env whose episode ended is reset inside `step`; the returned observation is the new
 episode's first one, and `final_obs` keeps the last observation of the old episode (the learner
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from corn_drake.config import TeacherDiagramConfig
+from corn_drake.config_student import StudentDiagramConfig
 from corn_drake.errors import InputError
 
 
@@ -65,7 +67,9 @@ class EnvFactory:
     than a reset.
     """
 
-    config: TeacherDiagramConfig
+    # A StudentDiagramConfig makes StudentEnvs (observations {"student", "teacher"}); the
+    # object and seed settings are its teacher part's.
+    config: TeacherDiagramConfig | StudentDiagramConfig
     seed: int = 0
     # Envs sharing the object rounds (all workers' together), to spread their starting offsets;
     # 0: EnvBatch / RayEnvBatch fill in their own total.
@@ -74,10 +78,17 @@ class EnvFactory:
     # episode seeds from about where it stopped instead of replaying its first episodes.
     start_episode: int = 0
 
+    @property
+    def teacher_config(self) -> TeacherDiagramConfig:
+        """The teacher diagram's config (a student config's teacher part)."""
+        if isinstance(self.config, StudentDiagramConfig):
+            return self.config.teacher
+        return self.config
+
     @functools.cached_property
     def train_objects(self) -> list[str] | None:
         """The train ids the envs cycle through; None when the config fixes one object."""
-        obj = self.config.scene.object
+        obj = self.teacher_config.scene.object
         return library_train_ids(obj.library) if obj.cycles_library else None
 
     def object_for(self, index: int, episode: int) -> str | None:
@@ -92,21 +103,33 @@ class EnvFactory:
 
     def make(self, index: int, episode: int = 0):
         from corn_drake.rl.env import TeacherEnv
+        from corn_drake.rl.student_env import StudentEnv
 
         cfg = copy.deepcopy(self.config)
+        student = isinstance(cfg, StudentDiagramConfig)
+        teacher_cfg = cfg.teacher if student else cfg
         object_id = self.object_for(index, episode)
         if object_id is None:
-            cfg.seed = self.seed + index
+            teacher_cfg.seed = self.seed + index
         else:
             # Pooled envs run any env's episodes of their object: the build (its cloud subset)
             # depends on the object only, so which env built it changes nothing.
-            cfg.seed = self.seed
-            cfg.scene.object.library_objects, cfg.scene.object.object_id = "one", object_id
-        return TeacherEnv(cfg)
+            teacher_cfg.seed = self.seed
+            teacher_cfg.scene.object.library_objects = "one"
+            teacher_cfg.scene.object.object_id = object_id
+        return StudentEnv(cfg) if student else TeacherEnv(cfg)
 
 
-def stack_obs(observations: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    return {k: np.stack([o[k] for o in observations]) for k in observations[0]}
+def stack_obs(observations: list[dict]) -> dict:
+    """One array per key (nested dicts, as a StudentEnv's, stay nested), envs along axis 0."""
+    return {k: stack_obs([o[k] for o in observations]) if isinstance(observations[0][k], dict)
+            else np.stack([o[k] for o in observations]) for k in observations[0]}
+
+
+def concat_obs(parts: list[dict]) -> dict:
+    """Batched observations (stack_obs's) joined along axis 0, nested dicts kept."""
+    return {k: concat_obs([p[k] for p in parts]) if isinstance(parts[0][k], dict)
+            else np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 @dataclasses.dataclass
