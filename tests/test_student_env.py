@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from corn_drake.contract import OBS_KEYS, STUDENT_OBS_KEYS, observation_shapes
+from corn_drake.contract import (ACTION_DIM, OBS_KEYS, ROBOT_STATE_DIM, STUDENT_OBS_KEYS,
+                                 observation_shapes)
 from corn_drake.diagrams_student import load_student_config
 from corn_drake.errors import InputError
 from corn_drake.rl.env import TeacherEnv
@@ -29,7 +30,7 @@ def env():
 
 
 def _actions(n, seed=0):
-    return np.random.default_rng(seed).uniform(-1, 1, (n, 20))
+    return np.random.default_rng(seed).uniform(-1, 1, (n, ACTION_DIM))
 
 
 def test_reset_and_step_return_both_observation_sets(env):
@@ -91,7 +92,7 @@ def test_episodes_differ_and_a_seed_repeats(env):
                 np.testing.assert_array_equal(a[part][key], b[part][key], err_msg=f"{part}.{key}")
 
 
-@pytest.mark.parametrize("action", [np.zeros(19), np.full(20, np.nan)])
+@pytest.mark.parametrize("action", [np.zeros(ACTION_DIM - 1), np.full(ACTION_DIM, np.nan)])
 def test_bad_action_raises_before_the_simulator(env, action):
     env.reset(seed=0)
     t0 = env.context.get_time()
@@ -108,7 +109,7 @@ def test_perception_choice():
     gt = StudentEnv(_config(), perception="ground_truth")
     assert gt.perception == "ground_truth" and gt.cfg.segmentation.mode == "ground_truth"
     obs, info = gt.reset(seed=0)
-    obs = gt.step(np.zeros(20))[0]
+    obs = gt.step(np.zeros(ACTION_DIM))[0]
     assert np.isfinite(obs["student"]["cloud"]).all()
 
 
@@ -133,12 +134,12 @@ def test_env_batch_of_student_envs_steps_and_auto_resets():
     assert obs["teacher"]["object_keypoints"].shape[0] == 2
     # The two envs run different episodes.
     assert not np.allclose(obs["teacher"]["goal"][0], obs["teacher"]["goal"][1])
-    batch.step(np.zeros((2, 20)))
-    result = batch.step(np.zeros((2, 20)))
+    batch.step(np.zeros((2, ACTION_DIM)))
+    result = batch.step(np.zeros((2, ACTION_DIM)))
     assert result.truncated.all() and len(result.episode_stats) == 2
     assert set(result.final_obs) == {0, 1}
     assert set(result.final_obs[0]) == {"student", "teacher"}
-    assert result.obs["student"]["robot_state"].shape == (2, 14)
+    assert result.obs["student"]["robot_state"].shape == (2, ROBOT_STATE_DIM)
     # After the automatic reset the new episode starts with a zero previous action.
     assert np.all(result.obs["student"]["previous_action"] == 0)
     assert not np.all(result.final_obs[0]["student"]["previous_action"] == 0)
