@@ -143,3 +143,18 @@ def test_env_batch_of_student_envs_steps_and_auto_resets():
     # After the automatic reset the new episode starts with a zero previous action.
     assert np.all(result.obs["student"]["previous_action"] == 0)
     assert not np.all(result.final_obs[0]["student"]["previous_action"] == 0)
+
+
+def test_solver_failure_ends_the_episode_with_zero_observations(env, monkeypatch):
+    env.reset(seed=0)
+
+    class FailingSimulator:  # pydrake's Simulator methods cannot be patched
+        def AdvanceTo(self, t):
+            raise RuntimeError("solver failed")
+
+    monkeypatch.setattr(env, "simulator", FailingSimulator())
+    obs, reward, terminated, truncated, info = env.step(np.zeros(ACTION_DIM))
+    assert terminated and not truncated and reward == 0.0
+    assert info["sim_error"] == "solver failed" and "tracking" not in info
+    assert env.observation_space.contains(obs)
+    assert all(not v.any() for part in obs.values() for v in part.values())
