@@ -10,6 +10,7 @@ and is skipped when its output is already complete, so a killed demo resumes.
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
@@ -43,6 +44,7 @@ def run(args) -> int:
     from corn_drake.assets.library import build_procedural
     from corn_drake.assets.process import ProcessConfig
     from corn_drake.bench.report import write_report
+    from corn_drake.bench.sim import add_arguments as add_bench_sim_arguments
     from corn_drake.bench.sim import run as bench_sim
     from corn_drake.cli import main as cli
     from corn_drake.config import PretrainConfig
@@ -105,8 +107,10 @@ def run(args) -> int:
     result = run_episode(env, ScriptedPushAgent(env.cfg.controller), seed=3, max_steps=60,
                          record_path=out / "scripted_push.html")
     outputs["scripted push recording (Meshcat HTML)"] = result.recording
-    bench_args = type("Args", (), {"steps": args.bench_steps, "config": None, "seed": 0,
-                                   "policy": None})()
+    # The bench's own parser fills every default, so a flag added to bench sim reaches the demo.
+    bench_parser = argparse.ArgumentParser(add_help=False)
+    add_bench_sim_arguments(bench_parser)
+    bench_args = bench_parser.parse_args(["--steps", str(args.bench_steps)])
     report_path = out / "bench_sim.json"
     sim = write_report(str(report_path), "sim", bench_sim(bench_args))["results"]
     outputs["simulation speed report"] = report_path
