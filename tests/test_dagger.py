@@ -166,6 +166,20 @@ def test_a_killed_distill_run_resumes_at_its_checkpoint_step(teacher_run, tmp_pa
     assert sum(metrics["episodes_per_object"].values()) >= 2
     assert np.isfinite(rows[-1]["tracking_translation_error_m"])
     assert (out / "tb").is_dir() and (out / "plots" / "learning_curve.png").is_file()
+    # What evaluation loads: the run's config and a student that acts.
+    from corn_drake.rl.checkpoints import load_student_run
+
+    cfg, student = load_student_run(out)
+    assert cfg.total_steps == 40 and cfg.env.segmentation.mode == "ground_truth"
+    mean, hidden = student.step({k: v[:, 0] for k, v in _obs(1, 1).items()})
+    assert mean.shape == (1, ACTION_DIM) and torch.isfinite(mean).all()
+    # Up to the kill the run is its seed's: an uninterrupted run of those 2 windows learns the same.
+    again = tmp_path / "again"
+    assert _distill(teacher, encoder, again, 16) == 0
+    rows_again = json.loads((again / "metrics.json").read_text())["history"]
+    for key in ("loss", "teacher_action_fraction"):
+        assert [r[key] for r in rows_again] == pytest.approx([r[key] for r in rows[:2]], rel=1e-5)
+    capsys.readouterr()
     # The recorded config is the run's: a resume with another window is refused, naming it.
     assert _distill(teacher, encoder, out, 48, "--window", "8") == 2
     assert "--window" in capsys.readouterr().err

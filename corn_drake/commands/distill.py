@@ -156,6 +156,9 @@ def run(args) -> int:
         if recorded is not None:
             refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,
                                   ignore=RESUME_MAY_CHANGE, name=argument_of_field)
+        import torch
+
+        torch.manual_seed(cfg.seed)  # the student's fresh layers: a run is its seed's
         student = student_from_encoder(cfg.encoder, cfg.frozen)
         check_pretrained(student.encoder, cfg.encoder, cfg.allow_weak_encoder)
         trainer = DaggerTrainer(cfg, out, student, teacher)  # reads the checkpoint, writes nothing
