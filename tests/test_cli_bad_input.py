@@ -173,6 +173,14 @@ ROWS += [_row(f"train --device gpu {OUT}", "--device 'gpu'")]
 ROWS += [_row(f"train --task {{root}}/{name} {OUT}", "{root}/" + name, detail)
          for name, (_, detail) in BROKEN_CONFIGS.items()]
 
+# distill (issue 15): the teacher run must exist and be a trained teacher run.
+ROWS += [_row(f"distill {OUT}", "--teacher"),
+         _row(f"distill --teacher {{root}}/nosuch {OUT}", "--teacher {root}/nosuch"),
+         _row(f"distill --teacher {{root}}/run_no_history {OUT}",
+              "--teacher {root}/run_no_history", "not a trained teacher run"),
+         _row(f"distill --teacher {{root}}/nosuch --steps 0 {OUT}", "--steps"),
+         _row(f"distill --teacher {{root}}/nosuch --perception magic {OUT}", "--perception")]
+
 # Item 12: every command that reads an object library names the broken manifest.
 LIBRARY_READERS = ["objects --num 1 --out LIB", f"contact-data --objects LIB --num-samples 8 {OUT}",
                    f"train --objects LIB {OUT}", f"evaluate --run scripted --objects LIB {REPORT}"]

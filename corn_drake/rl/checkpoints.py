@@ -23,3 +23,32 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
     return cfg, agent
+
+
+def load_student_run(run_dir: str | Path):
+    """(DistillConfig, StudentPolicy in eval mode) of a `corn-drake distill` run folder, from its
+    config.yaml and checkpoints/last.pt (prev.pt if need be). The student's state_dict carries
+    its encoder's input normalisation and token statistics, so no encoder file is read."""
+    from corn_drake.config import load_config
+    from corn_drake.config_distill import DistillConfig
+    from corn_drake.errors import InputError
+    from corn_drake.nn.student import StudentPolicy
+    from corn_drake.run_config import run_config_path
+
+    run_dir = Path(run_dir)
+    path = run_config_path(run_dir)
+    if not path.is_file():
+        raise MissingInputError(f"{path} not found: is {run_dir} a run folder written by "
+                                "`corn-drake distill`?")
+    cfg = load_config(path, DistillConfig)
+    ckpt = run_dir / "checkpoints" / "last.pt"
+    state = load_checkpoint(ckpt, required=("kind", "student"))
+    if state is None or state["kind"] != "student":
+        raise MissingInputError(f"no student checkpoint in {run_dir}: expected {ckpt}")
+    student = StudentPolicy()
+    try:
+        student.load_state_dict(state["student"])
+    except RuntimeError as e:
+        raise InputError(f"{ckpt}: the saved student does not fit this version "
+                         f"({str(e).strip().splitlines()[-1].strip()})") from None
+    return cfg, student.eval()

@@ -27,7 +27,9 @@ from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+# to_cpu and count_episodes_per_object stay importable from here for existing callers.
+from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch,  # noqa: F401
+                                           restore_rng_state, rng_state, to_cpu)
 
 WINDOW = 100  # finished episodes behind the logged success rate and return
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
@@ -72,13 +74,8 @@ class Trainer:
         cfg = self.cfg
         # A resumed run's envs continue the object rounds where the run stopped (on average).
         start = sum(self.episodes_per_object.values()) // n_envs
-        factory = EnvFactory(cfg.env, cfg.seed, num_envs=n_envs, start_episode=start)
-        if cfg.workers > 0:
-            from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
-
-            init_ray(cfg.ray_address or None)
-            return RayEnvBatch(factory, cfg.workers, cfg.envs_per_worker)
-        return EnvBatch(factory, cfg.envs_per_worker)
+        return make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
+                              cfg.ray_address, start)
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -88,9 +85,7 @@ class Trainer:
                  "global_step": self.global_step, "update_index": self.update_index,
                  "history": self.history, "recent_episodes": self.recent_episodes,
                  "episodes_per_object": self.episodes_per_object,
-                 "torch_rng": torch.get_rng_state(),
-                 "generator": self.generator.get_state(),
-                 "np_rng": self.np_rng.bit_generator.state, "policy": self.cfg.policy}
+                 **rng_state(self.generator, self.np_rng), "policy": self.cfg.policy}
         save_checkpoint(self.checkpoint_path, state)
 
     def _load(self) -> None:
@@ -107,9 +102,7 @@ class Trainer:
         self.history = state["history"]
         self.recent_episodes = state.get("recent_episodes", [])  # absent in older checkpoints
         self.episodes_per_object = state.get("episodes_per_object", {})  # likewise
-        torch.set_rng_state(state["torch_rng"])
-        self.generator.set_state(state["generator"])
-        self.np_rng.bit_generator.state = state["np_rng"]
+        restore_rng_state(state, self.generator, self.np_rng)
 
     # --- one update --------------------------------------------------------------------------
     def _collect(self, obs_np):
@@ -209,27 +202,6 @@ class Trainer:
         write_json(self.out / "metrics.json", metrics)
         plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics
-
-
-def to_cpu(state):
-    """`state` (nested dicts / lists / tuples of tensors and plain values) with every tensor
-    moved to the CPU."""
-    if isinstance(state, torch.Tensor):
-        return state.cpu()
-    if isinstance(state, dict):
-        moved = type(state)((k, to_cpu(v)) for k, v in state.items())
-        if hasattr(state, "_metadata"):  # a module state_dict's version record, used on load
-            moved._metadata = state._metadata
-        return moved
-    if isinstance(state, (list, tuple)):
-        return type(state)(to_cpu(v) for v in state)
-    return state
-
-
-def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> None:
-    """Adds finished episodes (EnvBatch episode stats) to `counts`, object id -> episodes."""
-    for episode in episodes:
-        counts[episode["object"]] = counts.get(episode["object"], 0) + 1
 
 
 def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:

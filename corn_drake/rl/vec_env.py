@@ -22,6 +22,10 @@ from corn_drake.config import TeacherDiagramConfig
 from corn_drake.config_student import StudentDiagramConfig
 from corn_drake.errors import InputError
 
+# StudentEnv's tracking errors (info["tracking"]) whose episode means join the episode stats
+# as mean_<name>.
+TRACKING_STATS = ("translation_error_m", "rotation_error_deg")
+
 
 def cycle_object(ids: list[str], seed: int, index: int, episode: int, num_envs: int) -> str:
     """Env `index`'s object for its `episode`-th episode.
@@ -156,6 +160,10 @@ class EnvBatch:
         self.built = num_envs  # envs built so far (the pool's size plus the envs in use)
         self._returns = np.zeros(num_envs)
         self._lengths = np.zeros(num_envs, dtype=int)
+        # StudentEnvs' tracking error (info["tracking"]), summed over each episode's steps, and
+        # the count of steps that reported it (last column): info does not leave the batch, so
+        # its episode means travel in the episode stats.
+        self._tracking = np.zeros((num_envs, len(TRACKING_STATS) + 1))
 
     def __len__(self) -> int:
         return len(self.envs)
@@ -181,6 +189,7 @@ class EnvBatch:
         """Restarts every env's current episode from its beginning."""
         self._returns[:] = 0
         self._lengths[:] = 0
+        self._tracking[:] = 0
         return stack_obs([self._begin_episode(slot) for slot in range(len(self.envs))])
 
     def step(self, actions: np.ndarray) -> StepResult:
@@ -198,14 +207,21 @@ class EnvBatch:
             self._lengths[i] += 1
             if "sim_error" in info:
                 errors += 1
+            if "tracking" in info:
+                self._tracking[i] += [*(info["tracking"][k] for k in TRACKING_STATS), 1]
             if term or trunc:
                 status = info.get("status", {})
                 stats.append({"return": self._returns[i], "length": int(self._lengths[i]),
                               "success": float(status.get("success", 0.0)),
                               "sim_error": "sim_error" in info,
                               "object": env.scene.object_spec.name})
+                *sums, count = self._tracking[i]
+                if count:
+                    stats[-1].update({f"mean_{k}": float(v / count)
+                                      for k, v in zip(TRACKING_STATS, sums)})
                 final_obs[i] = obs
                 self._returns[i], self._lengths[i] = 0, 0
+                self._tracking[i] = 0
                 self._episodes[i] += 1
                 obs = self._begin_episode(i)  # object switches happen here: timed as steps
             obs_list.append(obs)

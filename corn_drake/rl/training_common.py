@@ -1,0 +1,63 @@
+"""What the teacher's PPO trainer (rl/trainer.py) and the student's DAgger (rl/dagger.py) share:
+the env batch of a run, CPU copies of state for checkpoints, the RNG state a resumed run
+continues from, and per-object episode counts."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+
+
+def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
+                   ray_address: str = "", start_episode: int = 0):
+    """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
+    Ray actors. `env_config` is a teacher or a student diagram config (EnvFactory)."""
+    n_envs = max(workers, 1) * envs_per_worker
+    factory = EnvFactory(env_config, seed, num_envs=n_envs, start_episode=start_episode)
+    if workers > 0:
+        from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+
+        init_ray(ray_address or None)
+        return RayEnvBatch(factory, workers, envs_per_worker)
+    return EnvBatch(factory, envs_per_worker)
+
+
+def to_cpu(state):
+    """`state` (nested dicts / lists / tuples of tensors and plain values) with every tensor
+    moved to the CPU."""
+    if isinstance(state, torch.Tensor):
+        return state.cpu()
+    if isinstance(state, dict):
+        moved = type(state)((k, to_cpu(v)) for k, v in state.items())
+        if hasattr(state, "_metadata"):  # a module state_dict's version record, used on load
+            moved._metadata = state._metadata
+        return moved
+    if isinstance(state, (list, tuple)):
+        return type(state)(to_cpu(v) for v in state)
+    return state
+
+
+def rng_state(generator: torch.Generator, np_rng: np.random.Generator) -> dict:
+    """The random streams a run draws from, for its checkpoint (restore_rng_state reads it)."""
+    return {"torch_rng": torch.get_rng_state(), "generator": generator.get_state(),
+            "np_rng": np_rng.bit_generator.state}
+
+
+def restore_rng_state(state: dict, generator: torch.Generator, np_rng: np.random.Generator) -> None:
+    torch.set_rng_state(state["torch_rng"])
+    generator.set_state(state["generator"])
+    np_rng.bit_generator.state = state["np_rng"]
+
+
+def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> None:
+    """Adds finished episodes (EnvBatch episode stats) to `counts`, object id -> episodes."""
+    for episode in episodes:
+        counts[episode["object"]] = counts.get(episode["object"], 0) + 1
+
+
+def recent_mean(episodes: list[dict], key: str) -> float:
+    """Mean of `key` over the episodes that have it (0.0 when none has: nothing finished yet)."""
+    values = [e[key] for e in episodes if key in e]
+    return float(np.mean(values)) if values else 0.0
