@@ -185,8 +185,9 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
         energy, _ = add_energy_meter(builder, plant.get_net_actuation_output_port(scene.panda),
                                      robot_state, physics.time_step)
     else:
-        # No penalty, no meter: it is a discrete update at every physics step (about 4 % of an
-        # env step here), and the reward would only multiply its sum by zero.
+        # No penalty, no meter: it is a symbolic discrete update behind a multiplexer at every
+        # physics step (with the symbolic torque law, ~5 % of an env step in a perf profile
+        # here), and the reward would only multiply its sum by zero.
         energy = source("energy_unused", [0.0]).get_output_port()
     reward, reward_hold = add_task_reward(builder, cfg.task, clock_of(physics), object_state,
                                           obs.GetOutputPort("hand_state"), energy)
