@@ -41,11 +41,12 @@ from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
 from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch, recent_mean,
-                                           restore_rng_state, rng_state, to_cpu)
+                                           progress_state, restore_progress, to_cpu)
 
 WINDOW = 100  # finished episodes behind the logged success rate and tracking error
 CHECKPOINT_KEYS = ("kind", "student", "optimizer", "global_step", "update_index", "beta",
-                   "history", "torch_rng", "generator", "np_rng")
+                   "history", "recent_episodes", "episodes_per_object", "torch_rng", "generator",
+                   "np_rng")
 
 
 def gaussian_kl(mean_p: torch.Tensor, log_std_p: torch.Tensor, mean_q: torch.Tensor,
@@ -114,11 +115,7 @@ class DaggerTrainer:
     def _save(self) -> None:
         state = {"kind": "student", "student": to_cpu(self.student.state_dict()),
                  "optimizer": to_cpu(self.optimizer.state_dict()),
-                 "global_step": self.global_step, "update_index": self.update_index,
-                 "beta": self.beta, "history": self.history,
-                 "recent_episodes": self.recent_episodes,
-                 "episodes_per_object": self.episodes_per_object,
-                 **rng_state(self.generator, self.np_rng)}
+                 "beta": self.beta, **progress_state(self)}
         save_checkpoint(self.checkpoint_path, state)
 
     def _load(self) -> None:
@@ -133,11 +130,7 @@ class DaggerTrainer:
             raise InputError(f"{self.checkpoint_path}: the saved student does not fit this "
                              f"version ({str(e).strip().splitlines()[-1].strip()})") from None
         self.optimizer.load_state_dict(state["optimizer"])
-        self.global_step, self.update_index = state["global_step"], state["update_index"]
-        self.history = state["history"]
-        self.recent_episodes = state["recent_episodes"]
-        self.episodes_per_object = state["episodes_per_object"]
-        restore_rng_state(state, self.generator, self.np_rng)
+        restore_progress(self, state)
 
     # --- one window --------------------------------------------------------------------------
     def _collect(self, obs_np, hidden, starts):

@@ -29,7 +29,7 @@ from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
 from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch,  # noqa: F401
-                                           restore_rng_state, rng_state, to_cpu)
+                                           progress_state, restore_progress, to_cpu)
 
 WINDOW = 100  # finished episodes behind the logged success rate and return
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
@@ -82,10 +82,7 @@ class Trainer:
         # CPU tensors (loaded with map_location="cpu"): a run resumes on any device.
         state = {"agent": to_cpu(self.agent.state_dict()), "ppo": to_cpu(self.ppo.state_dict()),
                  "reward_scaler": self.reward_scaler.state_dict(),
-                 "global_step": self.global_step, "update_index": self.update_index,
-                 "history": self.history, "recent_episodes": self.recent_episodes,
-                 "episodes_per_object": self.episodes_per_object,
-                 **rng_state(self.generator, self.np_rng), "policy": self.cfg.policy}
+                 **progress_state(self), "policy": self.cfg.policy}
         save_checkpoint(self.checkpoint_path, state)
 
     def _load(self) -> None:
@@ -98,11 +95,7 @@ class Trainer:
         self.agent.load_saved_state(state["agent"], self.checkpoint_path)
         self.ppo.load_state_dict(state["ppo"])
         self.reward_scaler.load_state_dict(state["reward_scaler"])
-        self.global_step, self.update_index = state["global_step"], state["update_index"]
-        self.history = state["history"]
-        self.recent_episodes = state.get("recent_episodes", [])  # absent in older checkpoints
-        self.episodes_per_object = state.get("episodes_per_object", {})  # likewise
-        restore_rng_state(state, self.generator, self.np_rng)
+        restore_progress(self, state)
 
     # --- one update --------------------------------------------------------------------------
     def _collect(self, obs_np):

@@ -1,6 +1,6 @@
 """What the teacher's PPO trainer (rl/trainer.py) and the student's DAgger (rl/dagger.py) share:
-the env batch of a run, CPU copies of state for checkpoints, the RNG state a resumed run
-continues from, and per-object episode counts."""
+the env batch of a run, CPU copies of state for checkpoints, the progress (counters, curves,
+RNG streams) a resumed run continues from, and per-object episode counts."""
 
 from __future__ import annotations
 
@@ -39,16 +39,29 @@ def to_cpu(state):
     return state
 
 
-def rng_state(generator: torch.Generator, np_rng: np.random.Generator) -> dict:
-    """The random streams a run draws from, for its checkpoint (restore_rng_state reads it)."""
-    return {"torch_rng": torch.get_rng_state(), "generator": generator.get_state(),
-            "np_rng": np_rng.bit_generator.state}
+# The run's progress every trainer keeps on the trainer object itself and in its checkpoint.
+PROGRESS_FIELDS = ("global_step", "update_index", "history", "recent_episodes",
+                   "episodes_per_object")
 
 
-def restore_rng_state(state: dict, generator: torch.Generator, np_rng: np.random.Generator) -> None:
+def progress_state(run) -> dict:
+    """What a checkpoint holds of `run`'s progress (a PPO Trainer or a DaggerTrainer): its
+    counters, history, recent episodes, per-object counts and the random streams it draws from
+    (`run.generator`, `run.np_rng`, torch's global one). restore_progress reads it back."""
+    return {**{name: getattr(run, name) for name in PROGRESS_FIELDS},
+            "torch_rng": torch.get_rng_state(), "generator": run.generator.get_state(),
+            "np_rng": run.np_rng.bit_generator.state}
+
+
+def restore_progress(run, state: dict) -> None:
+    run.global_step, run.update_index = state["global_step"], state["update_index"]
+    run.history = state["history"]
+    # Absent in checkpoints of teacher runs written before they were kept.
+    run.recent_episodes = state.get("recent_episodes", [])
+    run.episodes_per_object = state.get("episodes_per_object", {})
     torch.set_rng_state(state["torch_rng"])
-    generator.set_state(state["generator"])
-    np_rng.bit_generator.state = state["np_rng"]
+    run.generator.set_state(state["generator"])
+    run.np_rng.bit_generator.state = state["np_rng"]
 
 
 def count_episodes_per_object(counts: dict[str, int], episodes: list[dict]) -> None:
