@@ -251,6 +251,13 @@ class PPOConfig:
     with the names swapped; we follow the code, which produced the paper's results.
     bound_coef 0.02: paper and code; bound_limit 1.1 and max_grad_norm 1.0: code.
     Entropy bonus 0 (paper and code): none is implemented.
+
+    separate_critic, critic_lr: ours, off by default (the authors share the trunk). With it the
+    value comes from a second head of the same shape on the same (detached) encoder features,
+    trained by its own Adam at the fixed critic_lr on every minibatch of every epoch, whatever
+    the policy's KL does, with its gradient clipped on its own. Why: at our 1-2k-transition
+    batches the KL rule holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a
+    shared critic never fits the returns (docs/results/README.md, the one-step PPO probe).
     """
 
     gamma: float = 0.99
@@ -268,6 +275,8 @@ class PPOConfig:
     bound_coef: float = 0.02
     bound_limit: float = 1.1
     max_grad_norm: float = 1.0
+    separate_critic: bool = False
+    critic_lr: float = 3e-4
 
 
 @dc.dataclass

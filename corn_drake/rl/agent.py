@@ -8,6 +8,10 @@ and the hand pose + MLP head. Cloud and hand pose are normalised by the encoder 
 normalises keypoints and hand pose with the default encoder normalisation. The context (the
 contract's CONTEXT_KEYS, concatenated) is normalised by a running mean/std whose buffers are
 part of the agent's state_dict, so checkpoints carry them.
+
+With `separate_critic` the value comes from `critic_head`, a second head of the same shape on the
+same features (detached: the critic never trains the `e2e` encoder), instead of the actor's trunk
+(PPOConfig.separate_critic says why).
 """
 
 from __future__ import annotations
@@ -43,7 +47,8 @@ def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str | None
 
 
 class TeacherAgent(nn.Module):
-    def __init__(self, kind: str, encoder: nn.Module | None = None, feature_dim: int | None = None):
+    def __init__(self, kind: str, encoder: nn.Module | None = None, feature_dim: int | None = None,
+                 separate_critic: bool = False):
         super().__init__()
         if kind not in POLICY_KINDS:
             raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")
@@ -59,16 +64,31 @@ class TeacherAgent(nn.Module):
             encoder.eval()
             for p in encoder.parameters():
                 p.requires_grad_(False)
-        if kind in ("corn", "e2e"):
-            self.head = CrossAttentionActorCritic()
-        elif kind == "pn":
-            self.head = MLPActorCritic(feature_dim or 1024)
-        else:
-            self.head = MLPActorCritic(STATE_FEATURE_DIM)
+        self.head = self._make_head(kind, feature_dim)
+        # Only its value output is used; its unused actor layers cost a few k multiply-adds.
+        self.critic_head = self._make_head(kind, feature_dim) if separate_critic else None
+        if kind == "state":
             # No encoder: keypoints and hand pose on the scale the encoders see.
             self.state_normalization = InputNormalization()
         self.log_std = self.head.log_std
         self.context_normalizer = RunningMeanStd((CONTEXT_DIM,))
+
+    @staticmethod
+    def _make_head(kind: str, feature_dim: int | None) -> nn.Module:
+        if kind in ("corn", "e2e"):
+            return CrossAttentionActorCritic()
+        if kind == "pn":
+            return MLPActorCritic(feature_dim or 1024)
+        return MLPActorCritic(STATE_FEATURE_DIM)
+
+    def critic_parameters(self) -> list[nn.Parameter]:
+        """The separate critic's trainable parameters ([] when the critic shares the trunk)."""
+        return [] if self.critic_head is None else list(self.critic_head.parameters())
+
+    def actor_parameters(self) -> list[nn.Parameter]:
+        """Every other trainable parameter (all of them with a shared critic)."""
+        critic = {id(p) for p in self.critic_parameters()}
+        return [p for p in self.parameters() if p.requires_grad and id(p) not in critic]
 
     @property
     def frozen_encoder(self) -> bool:
@@ -111,7 +131,11 @@ class TeacherAgent(nn.Module):
             return self.encoder(obs["cloud"], obs["hand_state"])
 
     def forward(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.head(self.features(obs), self.normalized_context(obs["context"]))
+        features, context = self.features(obs), self.normalized_context(obs["context"])
+        mu, value = self.head(features, context)
+        if self.critic_head is not None:
+            value = self.critic_head(features.detach(), context)[1]
+        return mu, value
 
     def act(self, obs: dict[str, np.ndarray], unit_noise: np.ndarray | None = None) -> np.ndarray:
         """Action clipped to [-1, 1], for one or many observations: the Gaussian mean, or with

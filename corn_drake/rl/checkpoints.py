@@ -19,7 +19,9 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
     if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
-    agent = TeacherAgent(cfg.policy, load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder))
+    encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
+    agent = TeacherAgent(cfg.policy, encoder,
+                         separate_critic=cfg.ppo.separate_critic)
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
     return cfg, agent

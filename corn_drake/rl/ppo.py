@@ -60,8 +60,20 @@ class PPO:
         self.policy = policy
         self.cfg = cfg or PPOConfig()
         self.lr = self.cfg.lr
-        self.optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad],
-                                          lr=self.lr)
+        critic = list(policy.critic_parameters()) if hasattr(policy, "critic_parameters") else []
+        if self.cfg.separate_critic and not critic:
+            raise ValueError("ppo.separate_critic needs a policy built with a separate critic "
+                             "head (TeacherAgent(..., separate_critic=True))")
+        if critic and not self.cfg.separate_critic:
+            raise ValueError("the policy has a separate critic head but ppo.separate_critic is off")
+        if critic and not self.cfg.critic_lr > 0:
+            raise ValueError(f"ppo.critic_lr must be > 0, got {self.cfg.critic_lr}")
+        actor = (policy.actor_parameters() if critic
+                 else [p for p in policy.parameters() if p.requires_grad])
+        self.actor_params, self.critic_params = actor, critic
+        self.optimizer = torch.optim.Adam(actor, lr=self.lr)
+        # Its own Adam at a fixed lr: the KL rule and the early stop are about the policy.
+        self.critic_optimizer = torch.optim.Adam(critic, lr=self.cfg.critic_lr) if critic else None
 
     def _set_lr(self, kl: float) -> None:
         c = self.cfg
@@ -92,12 +104,17 @@ class PPO:
     def update(self, obs: Obs, actions: torch.Tensor, old_log_prob: torch.Tensor,
                advantages: torch.Tensor, returns: torch.Tensor,
                generator: torch.Generator | None = None) -> dict[str, float]:
-        """One PPO update on flat tensors (B, ...); returns statistics."""
+        """One PPO update on flat tensors (B, ...); returns statistics.
+
+        `minibatches` counts the policy's optimiser steps. With a separate critic, the critic
+        steps on every minibatch of every epoch (`critic_steps`), also after the policy's early
+        stop; with a shared one, the update ends at the stop."""
         c = self.cfg
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
         n = actions.shape[0]
-        stats = {"minibatches": 0, "early_stop": 0.0}
+        stats = {"minibatches": 0, "critic_steps": 0, "early_stop": 0.0}
         last: dict[str, torch.Tensor] = {}
+        separate = self.critic_optimizer is not None
         for _ in range(c.epochs):
             # Drawn on the CPU generator (the run's RNG stream on any device), then moved.
             order = torch.randperm(n, generator=generator).to(actions.device)
@@ -105,37 +122,61 @@ class PPO:
                 mb_obs = {k: v[idx] for k, v in obs.items()}
                 last = self.losses(mb_obs, actions[idx], old_log_prob[idx], advantages[idx],
                                    returns[idx])
-                kl = float(last["kl"])
+                actor_steps = not stats["early_stop"]
                 # The first minibatch of an update sees the unchanged policy (KL = 0): it always
                 # steps and leaves the lr alone. Later ones adapt the lr, and stop the update
                 # when the policy has already moved too far.
                 # An update that has to stop also lowers the lr: with the stop (1.5x target)
                 # below the lr-decrease threshold (2x), small early-minibatch KLs otherwise
                 # ratchet the lr up to lr_max while every update is cut short (seen in a probe).
-                if stats["minibatches"] > 0:
+                if actor_steps and stats["minibatches"] > 0:
+                    kl = float(last["kl"])
                     if kl > c.kl_stop_factor * c.kl_target:
                         self.lr = max(self.lr / 1.5, c.lr_min)
                         for group in self.optimizer.param_groups:
                             group["lr"] = self.lr
                         stats["early_stop"] = 1.0
-                        break
-                    self._set_lr(kl)
+                        actor_steps = False
+                    else:
+                        self._set_lr(kl)
+                if not actor_steps and not separate:
+                    break
                 self.optimizer.zero_grad()
-                last["total"].backward()
-                nn.utils.clip_grad_norm_(self.policy.parameters(), c.max_grad_norm)
-                self.optimizer.step()
-                stats["minibatches"] += 1
-            if stats["early_stop"]:
+                if separate:
+                    self.critic_optimizer.zero_grad()
+                    # The critic's loss reaches only the critic head (detached features), so
+                    # one backward serves both; the policy terms only while the policy steps.
+                    loss = c.value_coef * last["value"]
+                    if actor_steps:
+                        loss = loss + c.policy_coef * last["surrogate"] + c.bound_coef * last["bound"]
+                    loss.backward()
+                    nn.utils.clip_grad_norm_(self.critic_params, c.max_grad_norm)
+                    self.critic_optimizer.step()
+                    stats["critic_steps"] += 1
+                else:
+                    last["total"].backward()
+                if actor_steps:
+                    nn.utils.clip_grad_norm_(self.actor_params, c.max_grad_norm)
+                    self.optimizer.step()
+                    stats["minibatches"] += 1
+            if stats["early_stop"] and not separate:
                 break
         stats.update({k: float(v.detach()) for k, v in last.items()})
         stats["lr"] = self.lr
         return stats
 
     def state_dict(self) -> dict:
-        return {"optimizer": self.optimizer.state_dict(), "lr": self.lr}
+        state = {"optimizer": self.optimizer.state_dict(), "lr": self.lr}
+        if self.critic_optimizer is not None:
+            state["critic_optimizer"] = self.critic_optimizer.state_dict()
+        return state
 
     def load_state_dict(self, state: dict) -> None:
+        if (self.critic_optimizer is not None) != ("critic_optimizer" in state):
+            raise ValueError("the saved PPO state and this run disagree on ppo.separate_critic")
         self.optimizer.load_state_dict(state["optimizer"])
+        if self.critic_optimizer is not None:
+            self.critic_optimizer.load_state_dict(state["critic_optimizer"])
         self.lr = state["lr"]
 
 

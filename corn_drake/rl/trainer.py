@@ -53,7 +53,8 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.generator = torch.Generator().manual_seed(cfg.seed)
-        self.agent = TeacherAgent(cfg.policy, encoder)
+        self.agent = TeacherAgent(cfg.policy, encoder,
+                                  separate_critic=cfg.ppo.separate_critic)
         with torch.no_grad():
             self.agent.log_std.fill_(cfg.init_log_std)
         self.agent.to(self.device)  # before the optimiser takes its parameters
@@ -166,6 +167,7 @@ class Trainer:
                    # Optimiser steps this update took before the KL stop (epochs x minibatches
                    # when it never stops): the true amount of learning per update.
                    "gradient_steps": stats["minibatches"],
+                   "critic_steps": stats["critic_steps"], "value_loss": stats["value"],
                    "episodes": len(episodes), "sim_errors": sim_errors,
                    "success_rate": float(np.mean([e["success"] for e in recent])) if recent else 0.0,
                    "return": float(np.mean([e["return"] for e in recent])) if recent else 0.0,
