@@ -203,6 +203,23 @@ def test_push_task_puts_the_goal_beyond_the_object_as_seen_from_the_hand():
         assert info["status"]["orientation_error"] < 1e-6  # the goal keeps the start yaw
 
 
+def test_push_turn_task_turns_the_goal_and_checks_orientation():
+    """The orientation benchmark: the push task's goals turned by up to +-max_yaw, with the
+    orientation part of success (TaskReward.status, tested on its own elsewhere)."""
+    cfg = _task("push_turn")
+    t, g = cfg.task, cfg.task.goal
+    assert isinstance(g, PushFromHandGoal) and t.check_orientation and g.max_yaw > 0
+    assert t.success_orientation < g.max_yaw  # some goals need a turn
+    env = TeacherEnv(cfg)
+    errors = []
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        errors.append(info["status"]["orientation_error"])
+        assert info["status"]["success"] == 0.0
+    # Every goal yaw within the range, and some beyond the tolerance (a straight push fails).
+    assert max(errors) <= g.max_yaw + 1e-6 and max(errors) > t.success_orientation
+
+
 def test_reset_names_the_task_and_ranges_when_no_goal_fits():
     cfg = _task("push")
     cfg.task.goal_x, cfg.task.goal_y = [0.5, 0.6], [0.5, 0.6]  # off the table: never reachable
