@@ -297,6 +297,14 @@ class TrainConfig:
     # lower, since at std 1 every step jitters the hand by most of max_position_delta and a
     # run of a few 100k steps cannot shrink it (Adam moves it ~lr per optimiser step).
     init_log_std: float = 0.0
+    # Normalise the encoder's features (corn/e2e tokens, the pn global feature) per dimension by
+    # a running mean/std before the policy head, as the context is. Ours, off by default (the
+    # authors normalise every non-constant observation by running statistics; whether that
+    # includes the embedding is not stated). Measured: the frozen tokens' attended features
+    # have per-dimension means larger than their spread; normalising them cut the policy's move
+    # under one sign step of lr 1e-5 from KL 0.031 to 0.019, not enough to change how PPO
+    # behaves, and no learning gain was measured (docs/results/README.md).
+    normalize_features: bool = False
     # Torch device of the learner (agent, batched inference, PPO update): "cpu", "cuda" or
     # "cuda:N". Envs, observations and actions stay numpy on the CPU either way, and
     # checkpoints hold CPU tensors, so a run may resume on another device.

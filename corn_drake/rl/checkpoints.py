@@ -20,8 +20,11 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
-    agent = TeacherAgent(cfg.policy, encoder,
-                         separate_critic=cfg.ppo.separate_critic)
+    # Runs from before feature normalisation existed hold no feature_normalizer: their
+    # checkpoint, not today's default, says how their network was built.
+    normalize = any(k.startswith("feature_normalizer.") for k in state["agent"])
+    agent = TeacherAgent(cfg.policy, encoder, separate_critic=cfg.ppo.separate_critic,
+                         normalize_features=normalize)
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
     return cfg, agent

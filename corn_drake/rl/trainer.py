@@ -54,7 +54,8 @@ class Trainer:
         self.np_rng = np.random.default_rng(cfg.seed)
         self.generator = torch.Generator().manual_seed(cfg.seed)
         self.agent = TeacherAgent(cfg.policy, encoder,
-                                  separate_critic=cfg.ppo.separate_critic)
+                                  separate_critic=cfg.ppo.separate_critic,
+                                  normalize_features=cfg.normalize_features)
         with torch.no_grad():
             self.agent.log_std.fill_(cfg.init_log_std)
         self.agent.to(self.device)  # before the optimiser takes its parameters
@@ -155,7 +156,7 @@ class Trainer:
                                     stack["logp"].flatten(0, 1), adv.flatten(), ret.flatten(),
                                     self.generator)
             # Normalisers move after the update so collection and update saw the same inputs.
-            self.agent.update_normalizer(flat_obs["context"])
+            self.agent.update_normalizers(flat_obs)
             steps = cfg.rollout_steps * n_envs
             self.global_step += steps
             self.update_index += 1
