@@ -31,6 +31,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from corn_drake.contract import ACTION_DIM, STUDENT_OBS_KEYS, student_observation_shapes
 from corn_drake.nn.policy import gaussian_action
+from corn_drake.nn.threads import torch_threads
 from corn_drake.timing import PolicyClock
 
 
@@ -80,7 +81,10 @@ class StudentPolicySystem(LeafSystem):
 
     def _calc_step(self, context, value) -> None:
         obs = {k: torch.from_numpy(v)[None] for k, v in self.observation(context).items()}
-        with torch.no_grad():
+        # One observation at a time gains nothing from intra-op threads, and in this process
+        # Open3D's OpenMP workers (the ICP tracker) spin while torch's wait: one step of the
+        # student measured 140-330 ms with torch's 2 threads here, 5 ms with 1.
+        with torch_threads(1), torch.no_grad():
             mean, hidden = self._student.step(obs, self.hidden_state(context))
             noise = (None if self._unit_noise is None
                      else torch.as_tensor(np.asarray(self._unit_noise.Eval(context))))
