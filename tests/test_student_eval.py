@@ -14,7 +14,7 @@ import torch
 
 from corn_drake.cli import main
 from corn_drake.config_distill import DistillConfig
-from corn_drake.contract import ACTION_DIM, STUDENT_OBS_KEYS
+from corn_drake.contract import STUDENT_OBS_KEYS
 from corn_drake.diagrams_student import load_student_config
 from corn_drake.io_utils import save_checkpoint
 from corn_drake.nn.student import StudentPolicy

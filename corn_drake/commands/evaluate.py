@@ -64,17 +64,12 @@ def add_arguments(parser):
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
-# Fields only a `train` / only a `distill` run's config.yaml has (its top-level keys).
-def _config_keys(schema) -> set[str]:
-    from corn_drake.config import field_types
-
-    return set(field_types(schema))
-
-
 def run_kind(run: str) -> str:
     """"train" or "distill": which command wrote the run folder `run`, told by the top-level
     keys of its config.yaml; a missing config or one of neither kind is an error naming --run."""
-    from corn_drake.config import TrainConfig, read_tagged_yaml
+    import yaml
+
+    from corn_drake.config import TrainConfig, field_types, read_tagged_yaml
     from corn_drake.config_distill import DistillConfig
     from corn_drake.errors import MissingInputError
     from corn_drake.run_config import run_config_path
@@ -86,12 +81,13 @@ def run_kind(run: str) -> str:
                                 f"({', '.join(REFERENCES)})")
     try:
         data = read_tagged_yaml(path.read_text())
-    except Exception as e:  # not YAML, not text: neither kind of run
+    except (UnicodeDecodeError, yaml.YAMLError) as e:  # neither kind of run
         raise InputError(f"--run {run}: {path} is not a YAML run config "
                          f"({' '.join(str(e).split())[:200]})") from None
     keys = set(data) if isinstance(data, dict) else set()
-    train_only = _config_keys(TrainConfig) - _config_keys(DistillConfig)
-    distill_only = _config_keys(DistillConfig) - _config_keys(TrainConfig)
+    # The top-level fields only one of the two configs has (both have env, seed, ...).
+    train_fields, distill_fields = set(field_types(TrainConfig)), set(field_types(DistillConfig))
+    train_only, distill_only = train_fields - distill_fields, distill_fields - train_fields
     if keys & distill_only and not keys & train_only:
         return "distill"
     if keys & train_only and not keys & distill_only:

@@ -29,7 +29,7 @@ import torch
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
-from corn_drake.contract import ACTION_DIM, STUDENT_OBS_KEYS, student_observation_shapes
+from corn_drake.contract import ACTION_DIM, student_observation_shapes
 from corn_drake.nn.policy import gaussian_action
 from corn_drake.nn.threads import torch_threads
 from corn_drake.timing import PolicyClock
