@@ -207,6 +207,20 @@ def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,
                           cloud_indices=cloud_indices)
 
 
+def close_policy_loop(builder: DiagramBuilder, handles: TeacherDiagram, policy,
+                      stochastic: bool) -> None:
+    """Feeds `policy`'s `action` output (a PolicySystem or the student's StudentPolicySystem,
+    its observations already connected) to the IK latch and records it in `handles.policy`.
+    A stochastic policy gets its `unit_noise` from a RandomSource named "policy_noise": a fresh
+    N(0, 1) draw every policy period, seeded per episode by reseed_random_sources."""
+    builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
+    if stochastic:
+        noise = builder.AddNamedSystem("policy_noise", RandomSource(
+            RandomDistribution.kGaussian, ACTION_DIM, clock_of(handles.config.scene.physics).period))
+        builder.Connect(noise.get_output_port(), policy.GetInputPort("unit_noise"))
+    handles.policy = policy
+
+
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
                           meshcat=None, agent=None, stochastic_policy: bool = False) -> TeacherDiagram:
     """The teacher rollout diagram; the action is the exported input `controller.action`.
@@ -230,12 +244,7 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
             agent, cfg.scene.object.cloud_points, stochastic=stochastic_policy))
         builder.Connect(handles.observations.GetOutputPort("observation"),
                         policy.GetInputPort("observation"))
-        builder.Connect(policy.GetOutputPort("action"), handles.ik.GetInputPort("action"))
-        if stochastic_policy:
-            noise = builder.AddNamedSystem("policy_noise", RandomSource(
-                RandomDistribution.kGaussian, ACTION_DIM, clock_of(cfg.scene.physics).period))
-            builder.Connect(noise.get_output_port(), policy.GetInputPort("unit_noise"))
-        handles.policy = policy
+        close_policy_loop(builder, handles, policy, stochastic_policy)
     if meshcat is not None:
         from corn_drake.viz.meshcat import add_meshcat_visualizer
 

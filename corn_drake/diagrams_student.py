@@ -4,7 +4,8 @@
         --> ObjectSegmentation (robot state for the link test) --> PoseTracker (ICP)
         --> StudentObservations (+ RandomSource cloud and goal noise)
 
-Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`;
+Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`
+(absent when a StudentPolicySystem acts inside the diagram);
 outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (pose7, estimated),
 `perception.status` (PoseTracker STATUS_FIELDS), `perception.num_points`,
 `perception.object_cloud` (PointCloud of the segmented points).
@@ -28,7 +29,7 @@ from corn_drake.config import load_config
 from corn_drake.config_student import StudentDiagramConfig
 from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
                                  POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
-from corn_drake.diagrams import TeacherDiagram, add_teacher_systems
+from corn_drake.diagrams import TeacherDiagram, add_teacher_systems, close_policy_loop
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
@@ -56,6 +57,11 @@ class StudentDiagram:
     @property
     def scene(self) -> Scene:
         return self.teacher.scene
+
+    @property
+    def policy(self):
+        """The StudentPolicySystem of an evaluation diagram (None in a rollout diagram)."""
+        return self.teacher.policy
 
 
 def student_base_path() -> Path:
@@ -129,12 +135,22 @@ def add_perception_systems(builder: DiagramBuilder, scene: Scene, cfg: StudentDi
 
 
 def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectSpec | None = None,
-                          meshcat=None) -> StudentDiagram:
+                          meshcat=None, student=None,
+                          stochastic_policy: bool = False) -> StudentDiagram:
+    """The student rollout diagram; the action is the exported input `controller.action`.
+
+    With `student` (a StudentPolicy in eval mode), a StudentPolicySystem named "policy" reads
+    the student observations and closes the loop inside the diagram instead (the student's
+    evaluation diagram) and there is no action input; with `stochastic_policy` it samples its
+    actions (diagrams.close_policy_loop)."""
+    if stochastic_policy and student is None:
+        raise ValueError("stochastic_policy needs a student: without one the action is an input")
     cfg = cfg or load_student_config()
     cfg.check()
     builder = DiagramBuilder()
     teacher = add_teacher_systems(builder, cfg.teacher, spec)
-    builder.ExportInput(teacher.ik.GetInputPort("action"), "controller.action")
+    if student is None:
+        builder.ExportInput(teacher.ik.GetInputPort("action"), "controller.action")
     perception = add_perception_systems(builder, teacher.scene, cfg,
                                         teacher.sources["goal_pose"].get_output_port())
     n = cfg.segmentation.num_points
@@ -154,6 +170,14 @@ def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectS
     builder.Connect(perception.tracker.GetOutputPort("goal"), obs.GetInputPort("estimated_goal"))
     for key in STUDENT_OBS_KEYS:
         builder.ExportOutput(obs.GetOutputPort(key), f"student.{key}")
+    if student is not None:
+        from corn_drake.systems.student_policy import StudentPolicySystem  # torch: only here
+
+        policy = builder.AddNamedSystem("policy", StudentPolicySystem(
+            student, n, clock_of(cfg.teacher.scene.physics), stochastic_policy))
+        for key in STUDENT_OBS_KEYS:
+            builder.Connect(obs.GetOutputPort(key), policy.GetInputPort(key))
+        close_policy_loop(builder, teacher, policy, stochastic_policy)
     builder.ExportOutput(perception.tracker.GetOutputPort("pose"), "perception.pose")
     builder.ExportOutput(perception.tracker.GetOutputPort("status"), "perception.status")
     builder.ExportOutput(perception.segmentation.GetOutputPort("num_points"), "perception.num_points")

@@ -1,10 +1,12 @@
 """Whole episodes of a policy: the one episode runner and the evaluation report.
 
-run_episode runs one episode of a TeacherEnv, with the policy inside the diagram (an env built
-with `agent=`: a PolicySystem acts) or stepped through the gymnasium API (an agent with
-act(obs), or a callable obs -> action), optionally recorded to Meshcat HTML. evaluate runs
-episodes round-robin over objects and returns the report `corn-drake evaluate` writes; the
-demo, notebooks and tests use the same two functions.
+run_episode runs one episode of a TeacherEnv or StudentEnv, with the policy inside the diagram
+(an env built with `agent=` / `student=`: a PolicySystem / StudentPolicySystem acts) or stepped
+through the gymnasium API (an agent with act(obs), or a callable obs -> action), optionally
+recorded to Meshcat HTML. evaluate runs episodes round-robin over objects and returns the report
+`corn-drake evaluate` writes, for the teacher (a TeacherDiagramConfig) or the student (a
+StudentDiagramConfig: the same report plus its perception and pose-tracking errors); the demo,
+notebooks and tests use the same two functions.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ class EpisodeResult:
     status: dict  # the last step's task status (systems/reward.STATUS_FIELDS)
     sim_error: str | None = None
     recording: Path | None = None
+    # info["tracking"] of every step (StudentEnv: tracked vs true object pose), empty otherwise.
+    tracking: list[dict] = dataclasses.field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -34,7 +38,8 @@ class EpisodeResult:
 
 def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | None = None,
                 record_path: str | Path | None = None) -> EpisodeResult:
-    """Resets `env` (a TeacherEnv) and steps it until the episode ends or `max_steps`.
+    """Resets `env` (a TeacherEnv or StudentEnv) and steps it until the episode ends or
+    `max_steps`.
 
     policy: None when the env's policy is inside its diagram; otherwise an agent with
     act(obs) or a callable obs -> normalised action. record_path: save the episode as Meshcat
@@ -49,14 +54,16 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
     obs, info = env.reset(seed=seed)
     if record_path is not None:
         env.meshcat.StartRecording(set_visualizations_while_recording=False)
-    total, steps, status, error = 0.0, 0, info.get("status", {}), None
-    limit = max_steps or env.cfg.task.episode_steps
+    total, steps, status, error, tracking = 0.0, 0, info.get("status", {}), None, []
+    limit = max_steps or env.teacher_cfg.task.episode_steps
     while steps < limit:
         obs, reward, terminated, truncated, info = env.step(None if act is None else act(obs))
         total += reward
         steps += 1
         status = info.get("status", status)
         error = info.get("sim_error")
+        if "tracking" in info:
+            tracking.append(info["tracking"])
         if terminated or truncated:
             break
     recording = None
@@ -66,40 +73,83 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
         env.meshcat.StopRecording()
         recording = save_recording(env.meshcat, record_path)
     return EpisodeResult(steps=steps, total_reward=total, status=status, sim_error=error,
-                         recording=recording)
+                         recording=recording, tracking=tracking)
+
+
+def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int | None = None):
+    """The evaluation env of `cfg` with `policy` acting inside its diagram: for a
+    TeacherDiagramConfig a TeacherEnv holding a PolicySystem (`policy`: an agent with act(obs));
+    for a StudentDiagramConfig a StudentEnv holding a StudentPolicySystem (`policy`: a
+    StudentPolicy in eval mode). `seed` replaces the teacher part's seed (the object cloud
+    subset, the episode generator's default)."""
+    from corn_drake.config_student import StudentDiagramConfig
+    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.student_env import StudentEnv
+
+    if isinstance(cfg, StudentDiagramConfig):
+        if seed is not None:
+            cfg = dataclasses.replace(cfg, teacher=dataclasses.replace(cfg.teacher, seed=seed))
+        return StudentEnv(cfg, spec, meshcat, student=policy, stochastic_policy=stochastic)
+    if seed is not None:
+        cfg = dataclasses.replace(cfg, seed=seed)
+    return TeacherEnv(cfg, spec, meshcat, policy, stochastic)
+
+
+def _summary(values) -> dict:
+    values = np.asarray(values, float)
+    if values.size == 0:
+        return {"mean": None, "median": None, "max": None}
+    return {"mean": float(values.mean()), "median": float(np.median(values)),
+            "max": float(values.max())}
+
+
+def tracking_summary(steps: list[dict]) -> dict:
+    """Tracked vs true object pose over `steps` (StudentEnv info["tracking"] dicts): mean,
+    median and max of the position error (m) and the orientation error (deg: the full rotation,
+    so for an object with a symmetry axis it includes the unobservable roll), the fraction of
+    steps the tracker trusted its ICP result, and the step count."""
+    from corn_drake.rl.vec_env import TRACKING_STATS
+
+    out = {k: _summary([t[k] for t in steps]) for k in TRACKING_STATS}
+    out["ok_fraction"] = float(np.mean([t["ok"] > 0 for t in steps])) if steps else None
+    out["steps"] = len(steps)
+    return out
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
              stochastic: bool = False) -> dict:
     """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
-    in the diagram of `cfg` (a TeacherDiagramConfig); the first `record` are saved as Meshcat
-    HTML in `out_dir`. Episode k is seeded `seed + k`. A PolicySystem runs the agent inside
-    the diagram (the evaluation diagram); with `stochastic` it samples the actions from the
-    policy, the noise drawn from the episode's seed.
+    in the evaluation diagram of `cfg` (policy_env: a TeacherDiagramConfig and a teacher
+    agent, or a StudentDiagramConfig and a StudentPolicy); the first `record` are saved as
+    Meshcat HTML in `out_dir`. Episode k is seeded `seed + k`. The policy runs inside the
+    diagram; with `stochastic` it samples the actions, the noise drawn from the episode's seed.
 
-    Returns the report: task (cfg.task.name), action_step (cfg.controller.max_position_delta,
+    Returns the report: task (the task's name), action_step (controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
-    objects), per_object, mean_episode_length and one row per episode.
+    objects), per_object, mean_episode_length and one row per episode. A student's report adds
+    perception (its segmentation: "geometric" or "ground_truth"), tracking (tracking_summary
+    over every step of every episode) and each row's tracking (that episode's summary).
     """
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.student_env import StudentEnv
 
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
+    if episodes < 1:
+        raise InputError(f"evaluate: episodes must be >= 1, got {episodes}")
     meshcat = None
     if record > 0:
         from pydrake.geometry import Meshcat
 
         meshcat = Meshcat()
-    per_object, rows = defaultdict(list), []
+    per_object, rows, tracked = defaultdict(list), [], []
     envs = {}
     for k in range(episodes):
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
-            envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat,
-                                         agent, stochastic)
+            envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed)
+        env = envs[object_id]
         path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
-        result = run_episode(envs[object_id], seed=seed + k,
-                             record_path=path)
+        result = run_episode(env, seed=seed + k, record_path=path)
         per_object[object_id].append(result.success)
         rows.append({"episode": k, "object": object_id, "success": result.success,
                      "steps": result.steps, "return": result.total_reward,
@@ -107,14 +157,21 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
                      "orientation_error": result.status.get("orientation_error"),
                      "sim_error": result.sim_error,
                      "recording": None if result.recording is None else str(result.recording)})
+        if isinstance(env, StudentEnv):  # the student's pose tracking is part of its result
+            rows[-1]["tracking"] = tracking_summary(result.tracking)
+            tracked += result.tracking
     rates = {o: float(np.mean(s)) for o, s in per_object.items()}
-    return {"task": cfg.task.name,
-            "action_step": cfg.controller.max_position_delta,
-            "success_rate": float(np.mean([r["success"] for r in rows])),
-            "balanced_success_rate": float(np.mean(list(rates.values()))),
-            "per_object": rates,
-            "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
-            "episodes": rows}
+    teacher_cfg = env.teacher_cfg
+    report = {"task": teacher_cfg.task.name,
+              "action_step": teacher_cfg.controller.max_position_delta,
+              "success_rate": float(np.mean([r["success"] for r in rows])),
+              "balanced_success_rate": float(np.mean(list(rates.values()))),
+              "per_object": rates,
+              "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
+              "episodes": rows}
+    if isinstance(env, StudentEnv):
+        report.update({"perception": env.perception, "tracking": tracking_summary(tracked)})
+    return report
 
 
 def success_by_group(episodes: list[dict], groups: dict[str, str]) -> dict:

@@ -145,7 +145,7 @@ def run(args) -> dict:
 
     import torch
 
-    from corn_drake.bench.timed_training import torch_threads
+    from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.device import training_device
     from corn_drake.run_config import load_env_config
 

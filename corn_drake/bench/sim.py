@@ -57,7 +57,7 @@ def _episodes(env, steps: int, seed: int):
     rng = np.random.default_rng(seed)
     plans, left = [], steps
     while left > 0:
-        n = min(left, env.cfg.task.episode_steps)
+        n = min(left, env.teacher_cfg.task.episode_steps)
         plans.append((int(rng.integers(1 << 31)), rng.uniform(-1, 1, (n, ACTION_DIM))))
         left -= n
     return plans

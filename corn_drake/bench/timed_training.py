@@ -12,7 +12,6 @@ its production code.
 
 from __future__ import annotations
 
-import contextlib
 from typing import Callable
 
 from corn_drake.cli_types import nonnegative_int, positive_int
@@ -48,24 +47,6 @@ def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str 
                        total_steps=per_update * (args.warmup_updates + args.updates),
                        rollout_steps=args.rollout_steps, seed=args.seed, device=device,
                        env=env_cfg)
-
-
-@contextlib.contextmanager
-def torch_threads(count: int | None):
-    """torch.set_num_threads(count) inside (None: torch's own choice), the caller's count back
-    after: the setting is process-wide, and a caller in the same process (a notebook, the
-    tests) keeps its own."""
-    import torch
-
-    before = torch.get_num_threads()
-    if count is not None:
-        # Measured here on a 2-core machine with another process busy: batch-32 inference
-        # took 0.7 s with torch's 2 threads, 0.017 s with 1 (threads waiting on each other).
-        torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def time_updates(trainer, timer, warmup_updates: int = 0) -> None:

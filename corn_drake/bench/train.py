@@ -89,8 +89,9 @@ def run(args) -> dict:
 
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.sim import bare_physics_rate, check_replayable
-    from corn_drake.bench.timed_training import (check_counts, run_trainer, torch_threads,
-                                                 train_config, trainer_logged_steps_per_s)
+    from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
+                                                 trainer_logged_steps_per_s)
+    from corn_drake.nn.threads import torch_threads
     from corn_drake.run_config import load_env_config
 
     env_cfg = load_env_config(args.task)

@@ -1,12 +1,21 @@
-"""`corn-drake evaluate`: success of a trained teacher in the evaluation diagram.
+"""`corn-drake evaluate`: success of a trained teacher or student in the evaluation diagram.
 
 A run is evaluated on exactly the env it was trained on: its config.yaml (task, controller
-action step, episode length, object or library). `--task` and `--set` override it; what they
-change is printed and recorded in the report (`overrides`), with the task's name and the action
-step. The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
-(the run's object, or the --split objects of a library: --objects, else the one the run was
-trained on with `train --objects`); K of them are recorded to Meshcat HTML next to the report.
-The report's folder (and the recordings') are checked writable before the first episode.
+action step, episode length, object or library). `--task` and `--set` override it (for a
+student run, the teacher part of its student diagram); what they change is printed and recorded
+in the report (`overrides`), with the task's name and the action step. The policy runs inside
+the diagram (PolicySystem, or for a student StudentPolicySystem with its GRU state in the
+context). Episodes go round-robin over the objects (the run's object, or the --split objects of
+a library: --objects, else the one the run was trained on with `train --objects`); K of them
+are recorded to Meshcat HTML next to the report. The report's folder (and the recordings') are
+checked writable before the first episode.
+
+Which policy: `--run` names a `corn-drake train` run (the teacher), a `corn-drake distill` run
+(the student: its config.yaml is a DistillConfig), or a reference controller. A student is
+evaluated through the full perception chain (cameras, geometric segmentation, ICP tracking,
+observation noise) whatever it was trained with, unless `--perception ground_truth` asks for
+the renderer's segmentation (tracking and noise stay on); its report adds `perception` and the
+pose-tracking errors (evaluation.tracking_summary).
 """
 
 from __future__ import annotations
@@ -18,15 +27,19 @@ from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.errors import InputError
 
 NAME = "evaluate"
-HELP = "evaluate a trained teacher policy (success rate, per object) with Meshcat recordings"
+HELP = ("evaluate a trained teacher or student policy (success rate, per object) with Meshcat "
+        "recordings")
 # Reference controllers `--run` accepts in place of a run folder (corn_drake/rl/scripted.py).
 REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
+    from corn_drake.config_student import SEGMENTATION_MODES
+
     parser.add_argument("--run", required=True,
-                        help="run folder written by `corn-drake train`, or a reference: "
-                             "`scripted` (straight-line pusher) or `still` (zero action)")
+                        help="run folder written by `corn-drake train` (teacher) or `corn-drake "
+                             "distill` (student), or a reference: `scripted` (straight-line "
+                             "pusher) or `still` (zero action)")
     parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
     parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
     parser.add_argument("--episodes", type=positive_int, default=10)
@@ -43,7 +56,44 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=nonnegative_int, default=1000)
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
+    parser.add_argument("--perception", choices=SEGMENTATION_MODES, default=None,
+                        help="student runs only: the segmentation of the perception chain "
+                             "(default geometric, the full chain whatever the student was "
+                             "trained with; ground_truth: the renderer's labels, ICP tracking "
+                             "and observation noise still on)")
     parser.add_argument("--report", required=True, help="JSON report path")
+
+
+def run_kind(run: str) -> str:
+    """"train" or "distill": which command wrote the run folder `run`, told by the top-level
+    keys of its config.yaml; a missing config or one of neither kind is an error naming --run."""
+    import yaml
+
+    from corn_drake.config import TrainConfig, field_types, read_tagged_yaml
+    from corn_drake.config_distill import DistillConfig
+    from corn_drake.errors import MissingInputError
+    from corn_drake.run_config import run_config_path
+
+    path = run_config_path(run)
+    if not path.is_file():
+        raise MissingInputError(f"--run {run}: {path} not found: expected a run folder written "
+                                "by `corn-drake train` or `corn-drake distill`, or a reference "
+                                f"({', '.join(REFERENCES)})")
+    try:
+        data = read_tagged_yaml(path.read_text())
+    except (UnicodeDecodeError, yaml.YAMLError) as e:  # neither kind of run
+        raise InputError(f"--run {run}: {path} is not a YAML run config "
+                         f"({' '.join(str(e).split())[:200]})") from None
+    keys = set(data) if isinstance(data, dict) else set()
+    # The top-level fields only one of the two configs has (both have env, seed, ...).
+    train_fields, distill_fields = set(field_types(TrainConfig)), set(field_types(DistillConfig))
+    train_only, distill_only = train_fields - distill_fields, distill_fields - train_fields
+    if keys & distill_only and not keys & train_only:
+        return "distill"
+    if keys & train_only and not keys & distill_only:
+        return "train"
+    raise InputError(f"--run {run}: {path} is neither a `corn-drake train` (teacher) nor a "
+                     "`corn-drake distill` (student) run config")
 
 
 def _whole_library(obj) -> str:
@@ -85,6 +135,13 @@ def run(args) -> int:
     ensure_writable(report_path.parent, "--report")
     if args.record > 0:
         ensure_writable(out_dir, "--record")
+    kind = "reference" if args.run in REFERENCES else run_kind(args.run)
+    if args.perception is not None and kind != "distill":
+        what = ("a reference controller" if kind == "reference"
+                else "a teacher run (`corn-drake train`)")
+        raise InputError(f"--perception {args.perception} applies to a student run (written by "
+                         f"`corn-drake distill`); --run {args.run} is {what}")
+    student_cfg = None
     if args.run in REFERENCES:
         if args.stochastic:
             raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
@@ -99,18 +156,43 @@ def run(args) -> int:
     else:
         # The run's own config: the task, controller and object(s) it was trained on;
         # --task and --set are overrides of it.
-        base, agent = load_run(args.run)
+        if kind == "distill":
+            from corn_drake.rl.checkpoints import load_student_run
+
+            distill_cfg, agent = load_student_run(args.run)
+            student_cfg = distill_cfg.env
+            # The student diagram's teacher part takes --task / --set exactly as a teacher
+            # run's env does.
+            base, policy = TrainConfig(env=student_cfg.teacher), "student"
+        else:
+            base, agent = load_run(args.run)
+            policy = base.policy
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
-        policy = base.policy
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     cfg.check()  # an override no episode can be built from, before any episode
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
+    objects = _object_specs(args, cfg)
+    extra = {}
+    if student_cfg is not None:
+        trained_with = student_cfg.segmentation.mode
+        # Evaluated through the full chain unless --perception says otherwise.
+        student_cfg = dataclasses.replace(
+            student_cfg, teacher=cfg,
+            segmentation=dataclasses.replace(student_cfg.segmentation,
+                                             mode=args.perception or "geometric"))
+        student_cfg.check()
+        cfg = student_cfg
+        extra = {"trained_perception": trained_with,
+                 "observation_noise": dataclasses.asdict(student_cfg.observation)}
+        print(f"student perception: {student_cfg.segmentation.mode} segmentation + ICP tracking "
+              f"(trained with {trained_with})")
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
-    report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
+    report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
                       out_dir, stochastic=args.stochastic)
+    report.update(extra)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],
                    "split": args.split, "actions": "sampled" if args.stochastic else "mean"})

@@ -18,6 +18,15 @@ from torch import nn
 from corn_drake.contract import ACTION_DIM, CONTEXT_DIM
 
 
+def gaussian_action(mean: torch.Tensor, log_std: torch.Tensor,
+                    unit_noise: torch.Tensor | None = None) -> torch.Tensor:
+    """The action a Gaussian policy executes, clipped to [-1, 1]: its mean, or with `unit_noise`
+    (N(0, 1) draws shaped like the mean, from the caller) the sample mean + exp(log_std) * noise.
+    One definition for the teacher's agent and the student's evaluation system."""
+    if unit_noise is not None:
+        mean = mean + log_std.exp() * unit_noise.to(mean).reshape(mean.shape)
+    return mean.clamp(-1, 1)
+
 
 def mlp(sizes: list[int], final_activation: bool = True) -> nn.Sequential:
     layers: list[nn.Module] = []

@@ -26,7 +26,7 @@ from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_F
 from corn_drake.errors import InputError
 from corn_drake.nn.encoder_io import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
-from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
+from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic, gaussian_action
 from corn_drake.rl.normalization import RunningMeanStd
 
 POLICY_KINDS = ("corn", "e2e", "state", "pn")
@@ -163,9 +163,6 @@ class TeacherAgent(nn.Module):
         batch = {k: np.asarray(v)[None] for k, v in obs.items()} if single else obs
         with torch.no_grad():
             mu, _ = self(obs_to_tensors(batch, self.log_std.device))
-            if unit_noise is not None:
-                noise = torch.as_tensor(np.asarray(unit_noise), dtype=mu.dtype,
-                                        device=mu.device).reshape(mu.shape)
-                mu = mu + self.log_std.exp() * noise
-        action = mu.clamp(-1, 1).cpu().numpy().astype(np.float64)
+            noise = None if unit_noise is None else torch.as_tensor(np.asarray(unit_noise))
+            action = gaussian_action(mu, self.log_std, noise).cpu().numpy().astype(np.float64)
         return action[0] if single else action

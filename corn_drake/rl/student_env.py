@@ -52,10 +52,16 @@ class StudentObservationReader:
 
 class StudentEnv(DiagramEnv):
     def __init__(self, config: StudentDiagramConfig | str | Path | None = None,
-                 spec: ObjectSpec | None = None, meshcat=None, perception: str | None = None):
+                 spec: ObjectSpec | None = None, meshcat=None, perception: str | None = None,
+                 student=None, stochastic_policy: bool = False):
         """`config`: a StudentDiagramConfig, or a YAML layer read on top of the base student
         diagram (load_student_config). `perception` ("geometric" or "ground_truth") overrides
-        the config's segmentation.mode on a copy; the ICP tracker runs in both."""
+        the config's segmentation.mode on a copy; the ICP tracker runs in both.
+
+        With `student` (a StudentPolicy in eval mode), a StudentPolicySystem inside the diagram
+        chooses the actions from the student observation, its GRU state in the context (the
+        student's evaluation diagram), and step() takes none; with `stochastic_policy` it
+        samples them (a RandomSource the episode's seed reseeds) instead of taking the mean."""
         if config is None or isinstance(config, (str, Path)):
             config = load_student_config(config)
         if perception is not None:
@@ -66,8 +72,9 @@ class StudentEnv(DiagramEnv):
             config.segmentation.mode = perception
         config.check()
         self.cfg = config
-        self.handles: StudentDiagram = build_student_diagram(config, spec, meshcat)
-        super().__init__(self.handles.teacher, meshcat)
+        self.handles: StudentDiagram = build_student_diagram(config, spec, meshcat, student,
+                                                             stochastic_policy)
+        super().__init__(self.handles.teacher, meshcat, agent_acts=student is not None)
         self._student_obs = StudentObservationReader(self.diagram, config.segmentation.num_points)
         self._teacher_obs = TeacherObservationReader(self.handles.teacher)
         self.observation_space = gym.spaces.Dict({"student": self._student_obs.space,
