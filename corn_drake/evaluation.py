@@ -70,12 +70,14 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
-             stochastic: bool = False) -> dict:
+             stochastic: bool = False, attention: bool = False) -> dict:
     """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
     in the diagram of `cfg` (a TeacherDiagramConfig); the first `record` are saved as Meshcat
     HTML in `out_dir`. Episode k is seeded `seed + k`. A PolicySystem runs the agent inside
     the diagram (the evaluation diagram); with `stochastic` it samples the actions from the
-    policy, the noise drawn from the episode's seed.
+    policy, the noise drawn from the episode's seed. With `attention` (an agent that
+    cross-attends: TeacherAgent.has_attention), its attention is painted on the object's cloud
+    every step, in the recordings and in the live Meshcat (made even when `record` is 0).
 
     Returns the report: task (cfg.task.name), action_step (cfg.controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
@@ -85,8 +87,11 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
 
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
+    if attention and not getattr(agent, "has_attention", False):
+        raise InputError(f"evaluate: attention needs a policy that cross-attends over patches "
+                         f"(corn, e2e), got {getattr(agent, 'kind', type(agent).__name__)!r}")
     meshcat = None
-    if record > 0:
+    if record > 0 or attention:
         from pydrake.geometry import Meshcat
 
         meshcat = Meshcat()
@@ -96,7 +101,7 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
             envs[object_id] = TeacherEnv(dataclasses.replace(cfg, seed=seed), spec, meshcat,
-                                         agent, stochastic)
+                                         agent, stochastic, attention)
         path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
         result = run_episode(envs[object_id], seed=seed + k,
                              record_path=path)

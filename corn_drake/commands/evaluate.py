@@ -6,6 +6,8 @@ change is printed and recorded in the report (`overrides`), with the task's name
 step. The policy runs inside the diagram (PolicySystem). Episodes go round-robin over the objects
 (the run's object, or the --split objects of a library: --objects, else the one the run was
 trained on with `train --objects`); K of them are recorded to Meshcat HTML next to the report.
+`--attention` paints a corn / e2e policy's attention on the object's points in those recordings
+and in the live Meshcat (viz/attention_view.py).
 The report's folder (and the recordings') are checked writable before the first episode.
 """
 
@@ -43,6 +45,10 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=nonnegative_int, default=1000)
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
+    parser.add_argument("--attention", action="store_true",
+                        help="paint the policy's cross-attention over the object's patches "
+                             "(viridis, every policy step) in the recordings and in the live "
+                             "Meshcat (its URL is printed); corn and e2e policies only")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -86,6 +92,9 @@ def run(args) -> int:
     if args.record > 0:
         ensure_writable(out_dir, "--record")
     if args.run in REFERENCES:
+        if args.attention:
+            raise InputError(f"--attention shows a learned policy's cross-attention; --run "
+                             f"{args.run} is a reference controller, which has none")
         if args.stochastic:
             raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                              "deterministic reference controller")
@@ -103,6 +112,9 @@ def run(args) -> int:
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         policy = base.policy
+        if args.attention and not agent.has_attention:
+            raise InputError(f"--attention: run {args.run} holds a {policy!r} policy, which has "
+                             "no cross-attention over patches (only corn and e2e have one)")
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     cfg.check()  # an override no episode can be built from, before any episode
@@ -110,7 +122,7 @@ def run(args) -> int:
           + "".join(f"; {change}" for change in overrides))
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
     report = evaluate(agent, cfg, _object_specs(args, cfg), args.episodes, args.record, args.seed,
-                      out_dir, stochastic=args.stochastic)
+                      out_dir, stochastic=args.stochastic, attention=args.attention)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],
                    "split": args.split, "actions": "sampled" if args.stochastic else "mean"})
