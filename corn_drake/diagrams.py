@@ -222,18 +222,25 @@ def close_policy_loop(builder: DiagramBuilder, handles: TeacherDiagram, policy,
 
 
 def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectSpec | None = None,
-                          meshcat=None, agent=None, stochastic_policy: bool = False) -> TeacherDiagram:
+                          meshcat=None, agent=None, stochastic_policy: bool = False,
+                          attention: bool = False) -> TeacherDiagram:
     """The teacher rollout diagram; the action is the exported input `controller.action`.
 
     With `agent` (a TeacherAgent), a PolicySystem closes the loop inside the diagram instead
     (the evaluation diagram, `corn-drake evaluate`) and there is no action input. With
     `stochastic_policy`, it samples its actions: a RandomSource named "policy_noise" feeds it
     N(0, 1) draws, a fresh one every policy period (reseed_random_sources seeds it per episode).
+    With `attention` (an agent that cross-attends, and a meshcat), the PolicySystem also
+    outputs its attention and an AttentionView named "attention_view" paints it on the object's
+    cloud in Meshcat every policy step (viz/attention_view.py).
     """
     from corn_drake.systems.policy import PolicySystem
 
     if stochastic_policy and agent is None:
         raise ValueError("stochastic_policy needs an agent: without one the action is an input")
+    if attention and (agent is None or meshcat is None):
+        raise ValueError("attention needs an agent (whose attention is shown) and a meshcat "
+                         "(where it is drawn)")
     cfg = cfg or load_teacher_config()
     builder = DiagramBuilder()
     handles = add_teacher_systems(builder, cfg, spec)
@@ -241,7 +248,8 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
         builder.ExportInput(handles.ik.GetInputPort("action"), "controller.action")
     else:
         policy = builder.AddNamedSystem("policy", PolicySystem(
-            agent, cfg.scene.object.cloud_points, stochastic=stochastic_policy))
+            agent, cfg.scene.object.cloud_points, stochastic=stochastic_policy,
+            attention=attention))
         builder.Connect(handles.observations.GetOutputPort("observation"),
                         policy.GetInputPort("observation"))
         close_policy_loop(builder, handles, policy, stochastic_policy)
@@ -249,6 +257,11 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
         from corn_drake.viz.meshcat import add_meshcat_visualizer
 
         add_meshcat_visualizer(builder, handles.scene.scene_graph, meshcat)
+        if attention:
+            from corn_drake.viz.attention_view import add_attention_view
+
+            add_attention_view(builder, handles.policy, handles.observations.GetOutputPort("cloud"),
+                               meshcat, cfg.scene.object.cloud_points, clock_of(cfg.scene.physics))
     handles.diagram = builder.Build()
     handles.diagram.set_name("teacher_rollout")
     return handles

@@ -76,12 +76,14 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
                          recording=recording, tracking=tracking)
 
 
-def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int | None = None):
+def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int | None = None,
+               attention: bool = False):
     """The evaluation env of `cfg` with `policy` acting inside its diagram: for a
     TeacherDiagramConfig a TeacherEnv holding a PolicySystem (`policy`: an agent with act(obs));
     for a StudentDiagramConfig a StudentEnv holding a StudentPolicySystem (`policy`: a
     StudentPolicy in eval mode). `seed` replaces the teacher part's seed (the object cloud
-    subset, the episode generator's default)."""
+    subset, the episode generator's default). `attention`: the teacher's attention view
+    (TeacherEnv)."""
     from corn_drake.config_student import StudentDiagramConfig
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.student_env import StudentEnv
@@ -92,7 +94,7 @@ def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int |
         return StudentEnv(cfg, spec, meshcat, student=policy, stochastic_policy=stochastic)
     if seed is not None:
         cfg = dataclasses.replace(cfg, seed=seed)
-    return TeacherEnv(cfg, spec, meshcat, policy, stochastic)
+    return TeacherEnv(cfg, spec, meshcat, policy, stochastic, attention)
 
 
 def _summary(values) -> dict:
@@ -117,12 +119,15 @@ def tracking_summary(steps: list[dict]) -> dict:
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
-             stochastic: bool = False) -> dict:
+             stochastic: bool = False, attention: bool = False) -> dict:
     """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
     in the evaluation diagram of `cfg` (policy_env: a TeacherDiagramConfig and a teacher
     agent, or a StudentDiagramConfig and a StudentPolicy); the first `record` are saved as
     Meshcat HTML in `out_dir`. Episode k is seeded `seed + k`. The policy runs inside the
     diagram; with `stochastic` it samples the actions, the noise drawn from the episode's seed.
+    With `attention` (a teacher that cross-attends: TeacherAgent.has_attention), its attention
+    is painted on the object's cloud every step, in the recordings and in the live Meshcat
+    (made even when `record` is 0).
 
     Returns the report: task (the task's name), action_step (controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
@@ -136,8 +141,11 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
         raise InputError("evaluate: no objects to evaluate on")
     if episodes < 1:
         raise InputError(f"evaluate: episodes must be >= 1, got {episodes}")
+    if attention and not getattr(agent, "has_attention", False):
+        raise InputError(f"evaluate: attention needs a policy that cross-attends over patches "
+                         f"(corn, e2e), got {getattr(agent, 'kind', type(agent).__name__)!r}")
     meshcat = None
-    if record > 0:
+    if record > 0 or attention:
         from pydrake.geometry import Meshcat
 
         meshcat = Meshcat()
@@ -146,7 +154,7 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     for k in range(episodes):
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
-            envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed)
+            envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed, attention)
         env = envs[object_id]
         path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
         result = run_episode(env, seed=seed + k, record_path=path)

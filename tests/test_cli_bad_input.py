@@ -103,6 +103,7 @@ ROWS = [
     _row(f"evaluate --run scripted --stochastic {REPORT}", "--stochastic"),
     _row(f"evaluate --run scripted --perception geometric {REPORT}", "--perception geometric"),
     _row(f"evaluate --run scripted --perception oracle {REPORT}", "--perception"),
+    _row(f"evaluate --run scripted --attention {REPORT}", "--attention", "reference"),
     _row(f"evaluate --run {{root}}/nowhere {REPORT}", "{root}/nowhere/config.yaml"),
     _row(f"evaluate --run scripted --task {{root}}/bad_type.yaml {REPORT}",
          "{root}/bad_type.yaml", "task.episode_steps"),

@@ -7,7 +7,9 @@ in the report (`overrides`), with the task's name and the action step. The polic
 the diagram (PolicySystem, or for a student StudentPolicySystem with its GRU state in the
 context). Episodes go round-robin over the objects (the run's object, or the --split objects of
 a library: --objects, else the one the run was trained on with `train --objects`); K of them
-are recorded to Meshcat HTML next to the report. The report's folder (and the recordings') are
+are recorded to Meshcat HTML next to the report; `--attention` paints a corn / e2e policy's
+attention on the object's points there and in the live Meshcat (viz/attention_view.py). The
+report's folder (and the recordings') are
 checked writable before the first episode.
 
 Which policy: `--run` names a `corn-drake train` run (the teacher), a `corn-drake distill` run
@@ -61,6 +63,10 @@ def add_arguments(parser):
                              "(default geometric, the full chain whatever the student was "
                              "trained with; ground_truth: the renderer's labels, ICP tracking "
                              "and observation noise still on)")
+    parser.add_argument("--attention", action="store_true",
+                        help="paint the policy's cross-attention over the object's patches "
+                             "(viridis, every policy step) in the recordings and in the live "
+                             "Meshcat (its URL is printed); corn and e2e policies only")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -143,6 +149,9 @@ def run(args) -> int:
                          f"`corn-drake distill`); --run {args.run} is {what}")
     student_cfg = None
     if args.run in REFERENCES:
+        if args.attention:
+            raise InputError(f"--attention shows a learned policy's cross-attention; --run "
+                             f"{args.run} is a reference controller, which has none")
         if args.stochastic:
             raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                              "deterministic reference controller")
@@ -169,6 +178,9 @@ def run(args) -> int:
             policy = base.policy
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
+        if args.attention and not getattr(agent, "has_attention", False):
+            raise InputError(f"--attention: run {args.run} holds a {policy!r} policy, which has "
+                             "no cross-attention over patches (only corn and e2e have one)")
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     cfg.check()  # an override no episode can be built from, before any episode
@@ -191,7 +203,7 @@ def run(args) -> int:
               f"(trained with {trained_with})")
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
     report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
-                      out_dir, stochastic=args.stochastic)
+                      out_dir, stochastic=args.stochastic, attention=args.attention)
     report.update(extra)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],

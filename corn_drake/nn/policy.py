@@ -70,8 +70,15 @@ class CrossAttentionActorCritic(nn.Module):
         return (weights @ v).flatten(1), weights
 
     def forward(self, tokens: torch.Tensor, context: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        attended, _ = self.attend(tokens, context)
-        return self.heads(torch.cat([attended, context], dim=-1))
+        return self.forward_with_weights(tokens, context)[:2]
+
+    def forward_with_weights(self, tokens: torch.Tensor, context: torch.Tensor
+                             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(action mean, value, attention weights (B, Q, T)) from one pass: what the policy
+        attended to when it chose that action (nn/attention.py turns it into patch scores)."""
+        attended, weights = self.attend(tokens, context)
+        mu, value = self.heads(torch.cat([attended, context], dim=-1))
+        return mu, value, weights
 
 
 class MLPActorCritic(nn.Module):

@@ -12,6 +12,10 @@ part of the agent's state_dict, so checkpoints carry them.
 With `separate_critic` the value comes from `critic_head`, a second head of the same shape on the
 same features (detached: the critic never trains the `e2e` encoder), instead of the actor's trunk
 (PPOConfig.separate_critic says why).
+
+`corn` and `e2e` can also say what they attended to when they chose an action: act_and_attend
+returns the action and the cross-attention as per-patch scores (nn/attention.py documents the
+normalisation) from the same forward pass; `state` and `pn` have no attention and refuse.
 """
 
 from __future__ import annotations
@@ -24,12 +28,16 @@ from torch import nn
 
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
 from corn_drake.errors import InputError
+from corn_drake.nn.attention import PatchAttention, nearest_patch, patch_scores
 from corn_drake.nn.encoder_io import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
+from corn_drake.nn.patchify import patch_indices
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic, gaussian_action
 from corn_drake.rl.normalization import RunningMeanStd
 
 POLICY_KINDS = ("corn", "e2e", "state", "pn")
+# The variants whose head cross-attends over the encoder's patch tokens.
+ATTENTION_KINDS = ("corn", "e2e")
 
 # An encoder maps (world-frame cloud (B, N, 3), hand state (B, 9)) to tokens (B, T, D) for
 # `corn` / `e2e`, or to a global feature (B, F) for `pn` (nn/encoder_io.NormalizedEncoder).
@@ -159,10 +167,59 @@ class TeacherAgent(nn.Module):
         `unit_noise` (N(0, 1) draws shaped like the action) the policy's sample
         mean + exp(log_std) * unit_noise. Pure: the same inputs give the same action, and the
         noise comes from the caller (PolicySystem's RandomSource input)."""
-        single = np.asarray(obs["goal"]).ndim == 1
-        batch = {k: np.asarray(v)[None] for k, v in obs.items()} if single else obs
+        single, batch = _as_batch(obs)
         with torch.no_grad():
             mu, _ = self(obs_to_tensors(batch, self.log_std.device))
-            noise = None if unit_noise is None else torch.as_tensor(np.asarray(unit_noise))
-            action = gaussian_action(mu, self.log_std, noise).cpu().numpy().astype(np.float64)
+        action = self._sample(mu, unit_noise)
         return action[0] if single else action
+
+    @property
+    def has_attention(self) -> bool:
+        """Whether the policy cross-attends over patches (corn, e2e), so act_and_attend works."""
+        return self.kind in ATTENTION_KINDS
+
+    def act_and_attend(self, obs: dict[str, np.ndarray], unit_noise: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, PatchAttention]:
+        """act(obs, unit_noise) and, from the same forward pass, the attention behind it: the
+        cross-attention weights as per-patch scores and each cloud point's patch
+        (nn/attention.PatchAttention; batched like the observation)."""
+        if not self.has_attention:
+            raise InputError(f"policy {self.kind!r} has no cross-attention over patches (only "
+                             f"{' and '.join(ATTENTION_KINDS)} have one): no attention to show")
+        single, batch = _as_batch(obs)
+        t = obs_to_tensors(batch, self.log_std.device)
+        norm, network = self.encoder.normalization, self.encoder.network
+        with torch.no_grad():
+            # The patches computed here are handed to the encoder, so the scores are over
+            # exactly the patches it tokenised (it would compute the same ones from the same
+            # normalised points).
+            points = norm.points(t["cloud"])
+            indices = patch_indices(points, network.num_patches, network.patch_size)
+            tokens = self.encoder(t["cloud"], t["hand_state"], indices)
+            if self.feature_normalizer is not None:  # as forward() does
+                tokens = self.feature_normalizer.normalize(tokens)
+            mu, _, weights = self.head.forward_with_weights(
+                tokens, self.normalized_context(t["context"]))
+            scores, hand = patch_scores(weights)
+            point_patch = nearest_patch(points, indices[0])
+        attention = PatchAttention(scores.cpu().numpy().astype(np.float64),
+                                   hand.cpu().numpy().astype(np.float64),
+                                   point_patch.cpu().numpy())
+        action = self._sample(mu, unit_noise)
+        return (action[0], attention.select(0)) if single else (action, attention)
+
+    def attention(self, obs: dict[str, np.ndarray]) -> PatchAttention:
+        """The attention of act_and_attend(obs) alone."""
+        return self.act_and_attend(obs)[1]
+
+    def _sample(self, mu: torch.Tensor, unit_noise: np.ndarray | None) -> np.ndarray:
+        """The mean `mu`, or mean + exp(log_std) * unit_noise, clipped to [-1, 1], in numpy."""
+        noise = None if unit_noise is None else torch.as_tensor(np.asarray(unit_noise))
+        with torch.no_grad():
+            return gaussian_action(mu, self.log_std, noise).cpu().numpy().astype(np.float64)
+
+
+def _as_batch(obs: dict[str, np.ndarray]) -> tuple[bool, dict[str, np.ndarray]]:
+    """(whether `obs` is a single observation, `obs` with a batch axis)."""
+    single = np.asarray(obs["goal"]).ndim == 1
+    return single, ({k: np.asarray(v)[None] for k, v in obs.items()} if single else obs)

@@ -148,16 +148,17 @@ class TeacherEnv(DiagramEnv):
 
     def __init__(self, config: TeacherDiagramConfig | str | Path | None = None,
                  spec: ObjectSpec | None = None, meshcat=None, agent=None,
-                 stochastic_policy: bool = False):
+                 stochastic_policy: bool = False, attention: bool = False):
         """With `agent`, a PolicySystem inside the diagram chooses the actions (the evaluation
         diagram) and step() takes none; with `stochastic_policy` it samples them (a RandomSource
-        the episode's seed reseeds) instead of taking the mean."""
+        the episode's seed reseeds) instead of taking the mean; with `attention`, its attention
+        is painted in `meshcat` every step (diagrams.build_teacher_diagram)."""
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
         config.check()
         self.cfg = config
         self.handles: TeacherDiagram = build_teacher_diagram(config, spec, meshcat, agent,
-                                                             stochastic_policy)
+                                                             stochastic_policy, attention)
         super().__init__(self.handles, meshcat, agent_acts=agent is not None)
         self._teacher_obs = TeacherObservationReader(self.handles)
         self.observation_space = self._teacher_obs.space
