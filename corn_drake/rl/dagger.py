@@ -38,6 +38,7 @@ from corn_drake.contract import STUDENT_OBS_KEYS
 from corn_drake.errors import InputError
 from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.student import StudentPolicy
+from corn_drake.nn.threads import torch_threads
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
 from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch, recent_mean,
@@ -142,7 +143,9 @@ class DaggerTrainer:
         self.student.eval()
         for _ in range(self.cfg.window):
             s_obs = student_tensors(obs_np["student"], device)
-            with torch.no_grad():
+            # In-process envs run Open3D's ICP in this process: its spinning worker threads made
+            # one student step take 140-330 ms with torch's 2 threads against 5 ms with 1.
+            with torch.no_grad(), torch_threads(1 if self.cfg.workers == 0 else None):
                 t_mean, _ = self.teacher(obs_to_tensors(obs_np["teacher"], device))
                 out = self.student({k: v.unsqueeze(1) for k, v in s_obs.items()}, hidden,
                                    starts.unsqueeze(1))
