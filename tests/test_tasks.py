@@ -200,7 +200,7 @@ def test_task_overlays_name_their_task_and_only_what_differs(name):
 def test_task_overlays_choose_their_goal_variant():
     goals = {n: type(load_env_config(n).task.goal) for n in available_tasks()}
     assert goals == {"full6d": Full6dGoal, "planar": PlanarGoal, "planar_near": PlanarGoal,
-                     "push": PushFromHandGoal}
+                     "push": PushFromHandGoal, "push_turn": PushFromHandGoal}
     push = load_env_config("push")
     assert not push.task.check_orientation and push.controller.max_position_delta == 0.03
     # Every overlay is listed in the folder's README.
