@@ -3,8 +3,8 @@
 A frozen encoder (`corn`, `pn`, `p2v-lite`, `rot`) gives the same features for the same
 observation, so the trainer computes them once when it collects a batch and every PPO epoch
 reuses them: the encoder runs once per collected observation batch and never inside the
-update. `e2e` trains its encoder, so
-its features must be recomputed in every minibatch of every epoch (a cache would freeze it).
+update. `e2e` trains its encoder, so its features must be recomputed in every minibatch of
+every epoch (a cache would freeze it).
 
 The environments are replaced by random observations of the contract's shapes: the counts
 depend on the trainer, not on the simulation, and the test needs no Drake.
