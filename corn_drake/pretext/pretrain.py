@@ -17,7 +17,7 @@ placements; unseen: the library's unseen objects), drawn once from the run's see
   since P2V-lite's targets move with its teacher.
 - P2V-lite also reports target_std / prediction_std (std over patches, mean over channels;
   point2vec's collapse check: targets near 0 std would make any loss small); ROT the mean
-  rotation error in degrees and the identity's.
+  rotation error in degrees, and the chordal mean's.
 The history's step-0 row is the untrained model on the val split.
 """
 
