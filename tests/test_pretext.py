@@ -186,7 +186,7 @@ def test_the_command_writes_the_model_folder_and_checks_its_data_argument(librar
         assert _pretrain(*args, "--out", str(tmp_path / "bad")) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and says in err, err
-    assert not (tmp_path / "bad" / "p2v-lite" / "config.yaml").exists()
+    assert not (tmp_path / "bad").exists()  # refused before anything was written
     # A resume with another library is refused before anything is written.
     other = write_tiny_library(tmp_path / "other")
     assert _pretrain("--model", "rot", "--objects", str(other), "--out", str(out)) == 2

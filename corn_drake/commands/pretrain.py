@@ -141,6 +141,7 @@ def _pretrain(args, out: Path) -> int:
 
 def _pretrain_pretext(args, out: Path) -> int:
     from corn_drake.config_pretext import PretextConfig, pretext_config
+    from corn_drake.contact.library_clouds import load_object_clouds
     from corn_drake.errors import InputError
     from corn_drake.io_utils import write_text
     from corn_drake.pretext.pretrain import PretextPretrainer
@@ -162,6 +163,7 @@ def _pretrain_pretext(args, out: Path) -> int:
     if args.eval_samples is not None:
         fields["eval_samples"] = args.eval_samples
     cfg = pretext_config(args.model, steps=args.steps, **fields)
+    load_object_clouds(args.objects)  # an unusable library fails before OUT is touched
     run_dir = out / args.model
     with lock_folder(run_dir):
         # Refusals (another library, other arguments, an unreadable checkpoint or library) come
