@@ -21,6 +21,7 @@ import pytest
 
 import corn_drake
 from corn_drake import contract
+from corn_drake.policy_kinds import POLICY_KINDS
 
 PACKAGE = Path(corn_drake.__file__).resolve().parent
 CONTRACT = PACKAGE / "contract.py"
@@ -283,7 +284,7 @@ def test_student_observations_follow_the_contract():
         list(contract.STUDENT_OBS_KEYS)
 
 
-@pytest.mark.parametrize("kind", ["corn", "e2e", "pn", "state"])
+@pytest.mark.parametrize("kind", POLICY_KINDS)
 def test_networks_take_the_contract_sizes(kind):
     import torch
 

@@ -1,9 +1,10 @@
 """The frozen-feature cache of teacher training (rl/trainer.py, TeacherAgent.features), counted.
 
-A frozen encoder (`corn`, `pn`) gives the same features for the same observation, so the trainer
-computes them once when it collects a batch and every PPO epoch reuses them: the encoder runs
-once per collected observation batch and never inside the update. `e2e` trains its encoder, so
-its features must be recomputed in every minibatch of every epoch (a cache would freeze it).
+A frozen encoder (`corn`, `pn`, `p2v-lite`, `rot`) gives the same features for the same
+observation, so the trainer computes them once when it collects a batch and every PPO epoch
+reuses them: the encoder runs once per collected observation batch and never inside the
+update. `e2e` trains its encoder, so its features must be recomputed in every minibatch of
+every epoch (a cache would freeze it).
 
 The environments are replaced by random observations of the contract's shapes: the counts
 depend on the trainer, not on the simulation, and the test needs no Drake.
@@ -16,13 +17,13 @@ import torch
 from corn_drake.config import TrainConfig
 from corn_drake.contract import ACTION_DIM, observation_shapes
 from corn_drake.nn.encoder_io import make_policy_encoder
+from corn_drake.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import StepResult
 
 NUM_POINTS = 64  # enough for 16 patches of 32; the agent reads any cloud size
 ENDS_EVERY = 3  # env 0's episodes end every third step, so final observations are encoded too
-ENCODER_KIND = {"corn": "corn", "e2e": "corn", "pn": "pointnet"}
 
 
 class RandomEnvs:
@@ -88,7 +89,7 @@ def _expected_collection_calls(updates, rollout_steps):
     return updates * (rollout_steps + 1) + endings
 
 
-@pytest.mark.parametrize("kind", ["corn", "pn"])
+@pytest.mark.parametrize("kind", FROZEN_ENCODER_POLICIES)
 def test_a_frozen_encoder_runs_once_per_collected_batch_and_never_in_ppo_epochs(
         kind, tmp_path, monkeypatch):
     in_collection, in_update, history, before, encoder = _train(kind, tmp_path, monkeypatch)
@@ -114,7 +115,7 @@ def _agent_and_obs(kind):
     return agent, obs_to_tensors(RandomEnvs(3).reset()), calls
 
 
-@pytest.mark.parametrize("kind", ["corn", "pn"])
+@pytest.mark.parametrize("kind", FROZEN_ENCODER_POLICIES)
 def test_cached_features_give_the_agent_the_same_output_without_the_encoder(kind):
     agent, obs, calls = _agent_and_obs(kind)
     with torch.no_grad():

@@ -26,6 +26,7 @@ from corn_drake import DIAGRAMS_DIR
 from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.contract import ACTION_DIM
 from corn_drake.errors import InputError
+from corn_drake.policy_kinds import POLICY_KINDS
 
 PREVIOUS_PHYSICS = DIAGRAMS_DIR / "physics" / "previous_default.yaml"
 
@@ -40,7 +41,7 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=nonnegative_int, default=0)
     parser.add_argument("--repeats", type=positive_int, default=3,
                         help="alternating env / bare-physics runs; the fastest of each is kept")
-    parser.add_argument("--policy", default=None, choices=("corn", "e2e", "state", "pn"),
+    parser.add_argument("--policy", default=None, choices=POLICY_KINDS,
                         help="also measure with this policy (randomly initialised) in the loop")
     parser.add_argument("--envs", type=positive_int, default=8,
                         help="envs in the policy-in-the-loop runs")

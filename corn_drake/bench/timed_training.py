@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import Callable
 
 from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.policy_kinds import POLICY_KINDS
 
 # The phases time_updates opens inside each window.
 COLLECT, PPO_UPDATE = "collect", "ppo_update"
@@ -22,7 +23,7 @@ COLLECT, PPO_UPDATE = "collect", "ppo_update"
 
 def add_trainer_arguments(parser) -> None:
     """The arguments every trainer benchmark takes (its env count is its own)."""
-    parser.add_argument("--policy", default="corn", choices=("corn", "e2e", "state", "pn"),
+    parser.add_argument("--policy", default="corn", choices=POLICY_KINDS,
                         help="policy trained (a randomly initialised encoder: timing only)")
     parser.add_argument("--task", default="push",
                         help="task overlay: a name in diagrams/tasks/ or a YAML file")

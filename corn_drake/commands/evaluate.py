@@ -66,7 +66,7 @@ def add_arguments(parser):
     parser.add_argument("--attention", action="store_true",
                         help="paint the policy's cross-attention over the object's patches "
                              "(viridis, every policy step) in the recordings and in the live "
-                             "Meshcat (its URL is printed); corn and e2e policies only")
+                             "Meshcat (its URL is printed); corn, e2e, p2v-lite and rot policies only")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -180,7 +180,7 @@ def run(args) -> int:
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         if args.attention and not getattr(agent, "has_attention", False):
             raise InputError(f"--attention: run {args.run} holds a {policy!r} policy, which has "
-                             "no cross-attention over patches (only corn and e2e have one)")
+                             "no cross-attention over patches (only corn, e2e, p2v-lite and rot have one)")
     overrides = config_changes(base, run_cfg)
     cfg = run_cfg.env
     cfg.check()  # an override no episode can be built from, before any episode

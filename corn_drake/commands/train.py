@@ -17,6 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.cli_types import finite_float, nonnegative_int, positive_int
+from corn_drake.policy_kinds import POLICY_KINDS
 
 NAME = "train"
 HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
@@ -49,15 +50,17 @@ def add_arguments(parser):
                         help="override a config field, e.g. --set ppo.lr=1e-4 or --set "
                              "task.episode_steps=50 (repeatable; KEY a TrainConfig field, the "
                              "env's sections scene/randomization/controller/task without env.)")
-    parser.add_argument("--policy", choices=("corn", "e2e", "state", "pn"), default=None,
-                        help="default: state")
+    parser.add_argument("--policy", choices=POLICY_KINDS, default=None,
+                        help="default: state (the variants: corn_drake/policy_kinds.py)")
     parser.add_argument("--objects", default=None,
                         help="object library folder: train on all its train objects "
                              "(default: the task's object)")
-    parser.add_argument("--encoder", default=None, help="pretrained encoder checkpoint (corn, pn)")
+    parser.add_argument("--encoder", default=None,
+                        help="pretrained encoder checkpoint (corn, pn, p2v-lite, rot), of the "
+                             "kind the policy names")
     parser.add_argument("--allow-weak-encoder", action="store_true", default=None,
-                        help="accept an --encoder whose pretraining contact F1 is below 0.8 "
-                             "(or unrecorded), with a warning")
+                        help="accept an --encoder below its pretraining bar (contact F1 0.8; "
+                             "pretext skill 0.2) or without a record, with a warning")
     parser.add_argument("--steps", type=positive_int, default=None,
                         help="total environment steps (default: 20000)")
     parser.add_argument("--workers", type=nonnegative_int, default=None,

@@ -3,15 +3,14 @@
 The CORN model predicts, per patch (16 FPS centres x 32 sorted neighbours), whether the gripper
 touches it; a patch is positive if any of its points is inside the gripper. The PointNet baseline
 predicts per point; its patch predictions are the max over the same patches, so both get the
-same patch-level metrics. Run folder: config.yaml, checkpoints/last.pt (atomic, resumable to the
-same step with every RNG's state; the one before kept as prev.pt, used if last.pt is unreadable),
-tb/, metrics.json, plots/predictions.png, encoder.pt (frozen-encoder export).
+same patch-level metrics. The loop, checkpoints (resumable to the same step) and the run folder
+are pretrain_loop.py's, shared with the pretext baselines (pretext/); this adds
+plots/predictions.png.
 """
 
 from __future__ import annotations
 
 import math
-import random
 import time
 from pathlib import Path
 
@@ -21,34 +20,15 @@ from torch import nn
 
 from corn_drake.config import PretrainConfig
 from corn_drake.contact.shards import load_split
-from corn_drake.errors import InputError
-from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
+from corn_drake.io_utils import atomic_path
 from corn_drake.nn.encoder import CORNContactModel
 from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_POSITION, POSE7_QUATERNION
-from corn_drake.nn.encoder_io import NormalizedEncoder, save_encoder
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics
 from corn_drake.nn.patchify import gather_points, patch_indices
 from corn_drake.nn.pointnet import PointNetContactModel
-
-
-def _global_rng_state() -> dict:
-    """Every global RNG a training step may draw from (dropout uses torch's), so a resumed run
-    continues the same random stream as an uninterrupted one."""
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(),
-             "python": random.getstate()}
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_global_rng_state(state: dict) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
+from corn_drake.pretrain_loop import PretrainLoop
 
 
 def hand9(hand_pose: torch.Tensor, normalization: InputNormalization) -> torch.Tensor:
@@ -87,31 +67,21 @@ def patch_labels(labels: torch.Tensor, knn_idx: torch.Tensor) -> torch.Tensor:
     return gather_points(labels.unsqueeze(-1).float(), knn_idx)[..., 0].amax(-1) > 0.5
 
 
-class Pretrainer:
+class Pretrainer(PretrainLoop):
+    """Contact pretraining on the shards of a contact-data folder (the loop: pretrain_loop.py)."""
+
     def __init__(self, cfg: PretrainConfig, data: str | Path, out: str | Path):
         if cfg.model not in ("corn", "pointnet"):
             raise ValueError(f"model must be corn or pointnet, got {cfg.model!r}")
-        self.cfg, self.out, self.data = cfg, Path(out), Path(data)
-        torch.manual_seed(cfg.seed)
-        self.model = CORNContactModel() if cfg.model == "corn" else PointNetContactModel()
-        # Exported with the encoder: policies normalise their inputs the same way.
-        self.normalization = InputNormalization()
-        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr,
-                                           weight_decay=cfg.weight_decay)
-        self.generator = torch.Generator().manual_seed(cfg.seed)
-        self.step, self.history, self.initial_loss = 0, [], None
-        self.train_seconds = 0.0  # optimisation wall-clock over all runs (resumes add to it)
+        self.data = Path(data)
+        super().__init__(cfg, out)
+
+    def build_model(self) -> nn.Module:
+        return CORNContactModel() if self.cfg.model == "corn" else PointNetContactModel()
+
+    def setup(self) -> None:
         self.train_set = {k: torch.from_numpy(v) for k, v in load_split(self.data, "train").items()
                           if k in ("points", "labels", "hand_pose")}
-        self.checkpoint = self.out / "checkpoints" / "last.pt"
-        self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
-
-    def lr_at(self, step: int) -> float:
-        c = self.cfg
-        if step < c.warmup_steps:
-            return c.lr * (step + 1) / c.warmup_steps
-        t = (step - c.warmup_steps) / max(c.steps - c.warmup_steps, 1)
-        return c.min_lr + 0.5 * (c.lr - c.min_lr) * (1 + math.cos(math.pi * min(t, 1.0)))
 
     def _forward(self, points, hand, labels):
         """(patch logits, patch labels, loss)."""
@@ -125,28 +95,12 @@ class Pretrainer:
         logits = gather_points(point_logits.unsqueeze(-1), knn)[..., 0].amax(-1)
         return logits, patch_labels(labels, knn), loss
 
-    def _save(self):
-        state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
-                 "generator": self.generator.get_state(), "rng": _global_rng_state(),
-                 "step": self.step, "history": self.history, "model_kind": self.cfg.model,
-                 "train_seconds": self.train_seconds}
-        save_checkpoint(self.checkpoint, state)
-
-    def _load(self):
-        state = load_checkpoint(self.checkpoint, required=("model", "optimizer", "generator",
-                                                           "step", "history"))
-        if state is None:
-            return
-        kind = state.get("model_kind", self.cfg.model)
-        if kind != self.cfg.model:
-            raise InputError(f"{self.checkpoint} holds a {kind!r} model, not {self.cfg.model!r}")
-        self.model.load_state_dict(state["model"])
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.generator.set_state(state["generator"])
-        if "rng" in state:  # absent in checkpoints written before it was kept
-            _set_global_rng_state(state["rng"])
-        self.step, self.history = state["step"], state["history"]
-        self.train_seconds = state.get("train_seconds", 0.0)
+    def batch_loss(self) -> torch.Tensor:
+        cfg = self.cfg
+        idx = torch.randint(len(self.train_set["points"]), (cfg.batch_size,), generator=self.generator)
+        pts, hand = prepare(self.train_set["points"][idx], self.train_set["hand_pose"][idx], cfg,
+                            self.generator, self.normalization)
+        return self._forward(pts, hand, self.train_set["labels"][idx])[2]
 
     @torch.no_grad()
     def evaluate(self, split: str) -> dict:
@@ -167,61 +121,15 @@ class Pretrainer:
         self.model.train()
         return binary_metrics(torch.cat(logits), torch.cat(targets))
 
-    def train(self, progress: bool = True) -> dict:
-        from torch.utils.tensorboard import SummaryWriter
-        from tqdm import tqdm
-
-        cfg = self.cfg
-        writer = SummaryWriter(str(self.out / "tb"))
-        n = len(self.train_set["points"])
-        bar = tqdm(total=cfg.steps, initial=self.step, disable=not progress, desc=f"pretrain {cfg.model}")
-        t0 = time.perf_counter()
-        while self.step < cfg.steps:
-            t_step = time.perf_counter()
-            idx = torch.randint(n, (cfg.batch_size,), generator=self.generator)
-            pts, hand = prepare(self.train_set["points"][idx], self.train_set["hand_pose"][idx], cfg,
-                                self.generator, self.normalization)
-            _, _, loss = self._forward(pts, hand, self.train_set["labels"][idx])
-            if self.initial_loss is None:
-                self.initial_loss = loss.item()
-            for group in self.optimizer.param_groups:
-                group["lr"] = self.lr_at(self.step)
-            self.optimizer.zero_grad()
-            loss.backward()
-            nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
-            self.optimizer.step()
-            self.step += 1
-            self.train_seconds += time.perf_counter() - t_step
-            writer.add_scalar("train/loss", loss.item(), self.step)
-            writer.add_scalar("train/lr", self.lr_at(self.step - 1), self.step)
-            bar.update(1)
-            bar.set_postfix(loss=f"{loss.item():.3f}")
-            if self.step % cfg.eval_every == 0 or self.step == cfg.steps:
-                row = {"step": self.step, "loss": loss.item(),
-                       **{f"val_{k}": v for k, v in self.evaluate("val").items()}}
-                self.history.append(row)
-                for k, v in row.items():
-                    if k.startswith("val_"):
-                        writer.add_scalar(f"val/{k[4:]}", v, self.step)
-            if self.step % cfg.checkpoint_every == 0:
-                self._save()
-        bar.close()
-        self._save()
-        writer.close()
-        metrics = {"model": cfg.model, "steps": self.step, "batch_size": cfg.batch_size,
-                   "samples_seen": self.step * cfg.batch_size, "train_samples": n,
-                   "seconds_this_run": time.perf_counter() - t0,
-                   "train_seconds": self.train_seconds, "lr": cfg.lr,
-                   "parameters": sum(p.numel() for p in self.model.parameters())}
+    def final_metrics(self) -> dict:
+        metrics = {"train_samples": len(self.train_set["points"])}
         for split, prefix in (("val", "heldout"), ("unseen", "unseen")):
             for k, v in self.evaluate(split).items():
                 metrics[f"{prefix}_patch_{k}"] = v
-        write_json(self.out / "metrics.json", metrics)
-        save_encoder(self.out / "encoder.pt",
-                     NormalizedEncoder(cfg.model, self.model.encoder, self.normalization),
-                     pretraining=metrics)
-        plot_predictions(self, self.out / "plots" / "predictions.png")
         return metrics
+
+    def write_plots(self) -> None:
+        plot_predictions(self, self.out / "plots" / "predictions.png")
 
 
 def seconds_per_step(model_kind: str, batch_size: int, repeats: int = 3) -> float:

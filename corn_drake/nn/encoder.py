@@ -72,11 +72,26 @@ class CORNEncoder(nn.Module):
                                          or extra_tokens.shape[0] != points.shape[0]):
             raise ValueError(f"extra_tokens must be (B, K, {self.dim}) with B = {points.shape[0]} "
                              f"clouds, got {tuple(extra_tokens.shape)}")
+        tokens, centers = self.tokenize(points, indices)
+        return self.transform(hand, tokens + self.embed_positions(centers), extra_tokens)
+
+    def tokenize(self, points: torch.Tensor, indices=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(patch tokens before the position embedding (B, G, D), patch centres (B, G, 3)).
+        Split from forward so a pretext task can replace some patches' tokens (P2V-lite's mask
+        token) and keep their positions."""
         center_idx, knn_idx = indices if indices is not None else patch_indices(
             points, self.num_patches, self.patch_size)
         centers, patches = group(points, center_idx, knn_idx)
-        tokens = self.tokenizer(patches.flatten(2))
-        tokens = tokens + torch.cat([centers, self.position(centers)], dim=-1)
+        return self.tokenizer(patches.flatten(2)), centers
+
+    def embed_positions(self, centers: torch.Tensor) -> torch.Tensor:
+        """(B, G, D): the centre itself in the first 3 channels, its MLP embedding in the rest."""
+        return torch.cat([centers, self.position(centers)], dim=-1)
+
+    def transform(self, hand: torch.Tensor, tokens: torch.Tensor,
+                  extra_tokens: torch.Tensor | None = None) -> torch.Tensor:
+        """Hand token, extra tokens and position-embedded patch tokens through the transformer
+        and the final LayerNorm -> (B, 1 + K + G, D)."""
         extra = [] if extra_tokens is None else [extra_tokens]
         x = torch.cat([self.hand(hand).unsqueeze(1), *extra, tokens], dim=1)
         for layer in self.layers:

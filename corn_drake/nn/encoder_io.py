@@ -6,6 +6,11 @@ clouds and hand states, and is what make_policy_encoder and load_frozen_encoder 
 
 encoder.pt: {"kind", "state_dict" (the network's), "normalization" (InputNormalization.record()),
 "pretraining" (how it was made)}.
+
+The kind names the network and how it was pretrained: "corn" (patch transformer, contact),
+"pointnet" (PointNet, contact), "p2v-lite" and "rot" (the same patch transformer as "corn",
+pretrained on a pretext task: corn_drake/pretext/). A policy asks for one kind
+(policy_kinds.ENCODER_KIND), so an encoder pretrained one way is never used as another.
 """
 
 from __future__ import annotations
@@ -20,15 +25,16 @@ from corn_drake.errors import InputError, MissingInputError
 from corn_drake.io_utils import atomic_path
 from corn_drake.nn.input_normalization import InputNormalization
 
-ENCODER_KINDS = ("corn", "pointnet")
+ENCODER_KINDS = ("corn", "pointnet", "p2v-lite", "rot")
+PATCH_ENCODER_KINDS = ("corn", "p2v-lite", "rot")  # CORNEncoder networks
 
 
 def make_network(kind: str) -> nn.Module:
-    """A freshly initialised network of `kind` ("corn" or "pointnet"), without normalisation."""
+    """A freshly initialised network of `kind` (ENCODER_KINDS), without normalisation."""
     from corn_drake.nn.encoder import CORNEncoder
     from corn_drake.nn.pointnet import PointNetEncoder
 
-    if kind == "corn":
+    if kind in PATCH_ENCODER_KINDS:
         return CORNEncoder()
     if kind == "pointnet":
         return PointNetEncoder()
@@ -37,14 +43,14 @@ def make_network(kind: str) -> nn.Module:
 
 class NormalizedEncoder(nn.Module):
     """(world-frame cloud (B, N, 3), hand state (B, 9)) -> the network's output on normalised
-    inputs: tokens (B, 1 + G, D) for "corn", a global feature (B, F) for "pointnet"."""
+    inputs: tokens (B, 1 + G, D) for the patch encoders, a global feature (B, F) for "pointnet"."""
 
     def __init__(self, kind: str, network: nn.Module, normalization: InputNormalization,
                  pretraining: dict | None = None):
         super().__init__()
         self.kind, self.network, self.normalization = kind, network, normalization
         # How the network was pretrained (steps, held-out / unseen patch metrics): policies
-        # check it, so an encoder that never learned contact is not used unawares. None for a
+        # check it, so an encoder that never learned its pretraining task is not used unawares. None for a
         # fresh network or an encoder exported before the record existed.
         self.pretraining = pretraining
 

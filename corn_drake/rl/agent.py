@@ -1,21 +1,24 @@
 """TeacherAgent: observation dict -> (action mean, value), for every policy variant.
 
-Variants (the paper's names): `corn` — frozen pretrained patch encoder + cross-attention head;
-`e2e` — the same encoder randomly initialised and trained by PPO; `pn` — a frozen pretrained
-PointNet's global feature + MLP head; `state` — no cloud, the object's bounding-box keypoints
-and the hand pose + MLP head. Cloud and hand pose are normalised by the encoder itself
-(NormalizedEncoder, with the normalisation it was pretrained with); the `state` variant
-normalises keypoints and hand pose with the default encoder normalisation. The context (the
-contract's CONTEXT_KEYS, concatenated) is normalised by a running mean/std whose buffers are
-part of the agent's state_dict, so checkpoints carry them.
+Variants (the paper's names, corn_drake/policy_kinds.py): `corn` — frozen contact-pretrained patch
+encoder + cross-attention head; `e2e` — the same encoder randomly initialised and trained by PPO;
+`p2v-lite` / `rot` — the same encoder pretrained on a pretext task (pretext/), frozen, with the
+same cross-attention head as `corn`; `pn` — a frozen pretrained PointNet's global feature + MLP
+head; `state` — no cloud, the object's bounding-box keypoints and the hand pose + MLP head.
+Cloud and hand pose are normalised by the encoder itself (NormalizedEncoder, with the
+normalisation it was pretrained with); the `state` variant normalises keypoints and hand pose
+with the default encoder normalisation. The context (the contract's CONTEXT_KEYS,
+concatenated) is normalised by a running mean/std whose buffers are part of the agent's
+state_dict, so checkpoints carry them.
 
 With `separate_critic` the value comes from `critic_head`, a second head of the same shape on the
 same features (detached: the critic never trains the `e2e` encoder), instead of the actor's trunk
 (PPOConfig.separate_critic says why).
 
-`corn` and `e2e` can also say what they attended to when they chose an action: act_and_attend
-returns the action and the cross-attention as per-patch scores (nn/attention.py documents the
-normalisation) from the same forward pass; `state` and `pn` have no attention and refuse.
+The cross-attention policies (`corn`, `e2e`, `p2v-lite`, `rot`) can also say what they attended
+to when they chose an action: act_and_attend returns the action and the cross-attention as
+per-patch scores (nn/attention.py documents the normalisation) from the same forward pass;
+`state` and `pn` have no attention and refuse.
 """
 
 from __future__ import annotations
@@ -33,14 +36,15 @@ from corn_drake.nn.encoder_io import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.patchify import patch_indices
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic, gaussian_action
+from corn_drake.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS, TOKEN_POLICIES
 from corn_drake.rl.normalization import RunningMeanStd
 
-POLICY_KINDS = ("corn", "e2e", "state", "pn")
 # The variants whose head cross-attends over the encoder's patch tokens.
-ATTENTION_KINDS = ("corn", "e2e")
+ATTENTION_KINDS = TOKEN_POLICIES
 
 # An encoder maps (world-frame cloud (B, N, 3), hand state (B, 9)) to tokens (B, T, D) for
-# `corn` / `e2e`, or to a global feature (B, F) for `pn` (nn/encoder_io.NormalizedEncoder).
+# the patch-encoder policies (TOKEN_POLICIES), or to a global feature (B, F) for `pn`
+# (nn/encoder_io.NormalizedEncoder).
 Encoder = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 
@@ -84,12 +88,12 @@ class TeacherAgent(nn.Module):
         # TrainConfig.normalize_features says why. None: features go in as the encoder gives them.
         self.feature_normalizer = None
         if normalize_features and kind != "state":
-            width = self.head.token_dim if kind in ("corn", "e2e") else (feature_dim or 1024)
+            width = self.head.token_dim if kind in TOKEN_POLICIES else (feature_dim or 1024)
             self.feature_normalizer = RunningMeanStd((width,))
 
     @staticmethod
     def _make_head(kind: str, feature_dim: int | None) -> nn.Module:
-        if kind in ("corn", "e2e"):
+        if kind in TOKEN_POLICIES:
             return CrossAttentionActorCritic()
         if kind == "pn":
             return MLPActorCritic(feature_dim or 1024)
@@ -106,8 +110,9 @@ class TeacherAgent(nn.Module):
 
     @property
     def frozen_encoder(self) -> bool:
-        """True for corn / pn: PPO never trains the encoder, so its features can be cached."""
-        return self.kind in ("corn", "pn")
+        """True for corn / pn / p2v-lite / rot: PPO never trains the encoder, so its features can
+        be cached."""
+        return self.kind in FROZEN_ENCODER_POLICIES
 
     def load_saved_state(self, state: dict, source) -> None:
         """Loads a state_dict saved from an agent of this kind; one that does not fit (another
@@ -138,7 +143,7 @@ class TeacherAgent(nn.Module):
 
     def features(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         if self.kind == "state":
-            # The hand pose too: corn/e2e/pn see it through the encoder's hand token, and
+            # The hand pose too: the cloud policies see it through the encoder's hand token, and
             # without it the state policy would have to learn the arm's kinematics from joints.
             norm = self.state_normalization
             keypoints = obs["object_keypoints"]
@@ -175,7 +180,8 @@ class TeacherAgent(nn.Module):
 
     @property
     def has_attention(self) -> bool:
-        """Whether the policy cross-attends over patches (corn, e2e), so act_and_attend works."""
+        """Whether the policy cross-attends over patches (TOKEN_POLICIES: corn, e2e, p2v-lite,
+        rot), so act_and_attend works."""
         return self.kind in ATTENTION_KINDS
 
     def act_and_attend(self, obs: dict[str, np.ndarray], unit_noise: np.ndarray | None = None
@@ -185,7 +191,7 @@ class TeacherAgent(nn.Module):
         (nn/attention.PatchAttention; batched like the observation)."""
         if not self.has_attention:
             raise InputError(f"policy {self.kind!r} has no cross-attention over patches (only "
-                             f"{' and '.join(ATTENTION_KINDS)} have one): no attention to show")
+                             f"{', '.join(ATTENTION_KINDS)} have one): no attention to show")
         single, batch = _as_batch(obs)
         t = obs_to_tensors(batch, self.log_std.device)
         norm, network = self.encoder.normalization, self.encoder.network

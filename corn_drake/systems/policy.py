@@ -41,7 +41,7 @@ class PolicySystem(LeafSystem):
         if attention and not getattr(agent, "has_attention", False):
             raise ValueError(f"PolicySystem(attention=True): policy "
                              f"{getattr(agent, 'kind', type(agent).__name__)!r} has no "
-                             "cross-attention over patches (only corn and e2e have one)")
+                             "cross-attention over patches (only corn, e2e, p2v-lite and rot have one)")
         self._agent = agent
         self._layout = ObservationLayout(num_points)
         self._obs = self.DeclareVectorInputPort("observation", self._layout.size)

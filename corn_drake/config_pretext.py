@@ -1,0 +1,88 @@
+"""PretextConfig: one pretext pretraining run (`corn-drake pretrain --model p2v-lite|rot`),
+recorded in RUN/config.yaml.
+
+The optimisation fields have PretrainConfig's names (the loop in pretrain_loop.py reads either);
+the defaults differ by model (PRETEXT_DEFAULTS), so `pretext_config(model)` is how a config is
+made. No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+"""
+
+import dataclasses as dc
+
+from corn_drake.errors import InputError
+
+PRETEXT_MODELS = ("p2v-lite", "rot")
+
+
+@dc.dataclass
+class PretextConfig:
+    model: str = "p2v-lite"  # p2v-lite | rot
+    steps: int = 2000
+    batch_size: int = 512  # point2vec's
+    lr: float = 1e-3
+    min_lr: float = 1e-6
+    weight_decay: float = 0.05
+    warmup_steps: int = 200
+    max_grad_norm: float = 4.0
+    # Dropout in the encoder's layers while pretraining: the paper's P2V-lite replaces
+    # point2vec's DropPath (rate rising 0 -> 0.25 over 12 layers, 0.125 on average) by dropout
+    # because the encoder has 2 layers; 0.1 is near that average.
+    dropout: float = 0.1
+    # Gaussian noise on every sampled point (m), as contact pretraining's 4 mm.
+    point_noise_std: float = 0.004
+    # --- P2V-lite -------------------------------------------------------------------------
+    # point2vec's masking ratio: 10 of the 16 patches are masked.
+    mask_ratio: float = 0.65
+    # point2vec's loss: SmoothL1 with beta 2 on the layer-normalised teacher features.
+    smooth_l1_beta: float = 2.0
+    # How the teacher's final-layer features are normalised into targets: "layer" (point2vec's
+    # default: over each patch's channels) or "instance" (over each channel's patches of one
+    # cloud; data2vec's choice where layer-normalised targets collapsed). See pretext/p2v.py.
+    target_norm: str = "instance"
+    # EMA teacher: the decay rises linearly from 1 - 1/(ema_start_horizon * steps) to
+    # 1 - 1/(ema_end_horizon * steps) over the first ema_ramp_fraction of the run, then stays.
+    # point2vec: 0.9998 -> 0.99999 over the first 200 of 800 epochs (65.6k steps), i.e. a
+    # teacher time constant of 5k -> 100k steps = 7.6 % -> 152 % of its run. Kept as fractions
+    # of the run: point2vec's decays at its length would leave the teacher at its random
+    # initialisation for a few-thousand-step run on a small library.
+    ema_start_horizon: float = 0.076
+    ema_end_horizon: float = 1.52
+    ema_ramp_fraction: float = 0.25
+    eval_every: int = 250
+    checkpoint_every: int = 250
+    eval_samples: int = 1024
+    seed: int = 0
+
+    def check(self) -> None:
+        """InputError naming the first field no run can use."""
+        if self.model not in PRETEXT_MODELS:
+            raise InputError(f"pretext model must be one of {PRETEXT_MODELS}, got {self.model!r}")
+        if not 0 < self.mask_ratio < 1:
+            raise InputError(f"mask_ratio must be in (0, 1), got {self.mask_ratio}")
+        if self.target_norm not in ("instance", "layer"):
+            raise InputError(f"target_norm must be instance or layer, got {self.target_norm!r}")
+        if not 0 <= self.dropout < 1:
+            raise InputError(f"dropout must be in [0, 1), got {self.dropout}")
+        for name in ("ema_start_horizon", "ema_end_horizon", "ema_ramp_fraction", "smooth_l1_beta",
+                     "lr", "batch_size", "steps"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"{name} must be > 0, got {getattr(self, name)}")
+
+
+# Per-model optimisation defaults. P2V-lite: point2vec's AdamW lr 1e-3, weight decay 0.05,
+# warm-up over the first 10 % (80 of 800 epochs), cosine to 1e-6. ROT: the appendix gives no
+# optimiser; CORN's contact pretraining's AdamW 2e-4 / 5e-4 is used, so the two patch-encoder
+# pretrainings differ in their task, not their optimiser.
+PRETEXT_DEFAULTS = {
+    "p2v-lite": {"lr": 1e-3, "weight_decay": 0.05},
+    "rot": {"lr": 2e-4, "weight_decay": 5e-4},
+}
+
+
+def pretext_config(model: str, steps: int = 2000, **fields) -> PretextConfig:
+    """A checked PretextConfig for `model` with its defaults, a 10 % warm-up, and `fields`."""
+    if model not in PRETEXT_MODELS:
+        raise InputError(f"pretext model must be one of {PRETEXT_MODELS}, got {model!r}")
+    values = {"warmup_steps": max(1, steps // 10), **PRETEXT_DEFAULTS[model], **fields}
+    cfg = PretextConfig(model=model, steps=steps, **values)
+    cfg.check()
+    return cfg
