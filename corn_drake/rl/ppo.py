@@ -144,17 +144,13 @@ class PPO:
                 self.optimizer.zero_grad()
                 if separate:
                     self.critic_optimizer.zero_grad()
-                    # The critic's loss reaches only the critic head (detached features), so
-                    # one backward serves both; the policy terms only while the policy steps.
-                    loss = c.value_coef * last["value"]
-                    if actor_steps:
-                        loss = loss + c.policy_coef * last["surrogate"] + c.bound_coef * last["bound"]
-                    loss.backward()
+                # A separate critic's loss reaches only its own head (detached features), so one
+                # backward serves both; after the policy's stop only the value term is left.
+                (last["total"] if actor_steps else c.value_coef * last["value"]).backward()
+                if separate:
                     nn.utils.clip_grad_norm_(self.critic_params, c.max_grad_norm)
                     self.critic_optimizer.step()
                     stats["critic_steps"] += 1
-                else:
-                    last["total"].backward()
                 if actor_steps:
                     nn.utils.clip_grad_norm_(self.actor_params, c.max_grad_norm)
                     self.optimizer.step()
