@@ -258,6 +258,8 @@ class PPOConfig:
     the policy's KL does, with its gradient clipped on its own. Why: at our 1-2k-transition
     batches the KL rule holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a
     shared critic never fits the returns (docs/results/README.md, the one-step PPO probe).
+    fan_in_lr_ref: ours, 0 (off) by default. > 0 scales the lr of each weight tensor by
+    min(1, fan_in_lr_ref / its fan-in) (rl/ppo.py fan_in_groups says why).
     """
 
     gamma: float = 0.99
@@ -277,6 +279,7 @@ class PPOConfig:
     max_grad_norm: float = 1.0
     separate_critic: bool = False
     critic_lr: float = 3e-4
+    fan_in_lr_ref: int = 0
 
 
 @dc.dataclass

@@ -266,3 +266,47 @@ def test_loss_weights_are_the_authors():
     assert value_mse > 1.0 and bound > 0.01  # each term weighs in the total
     expected = 0.5 * surrogate + 2.0 * 0.5 * value_mse + 0.02 * bound
     torch.testing.assert_close(losses["total"].detach(), expected, rtol=1e-5, atol=1e-6)
+
+
+def test_fan_in_lr_scaling_groups_weights_by_their_fan_in():
+    policy = CrossAttentionActorCritic()
+    ppo = PPO(policy, PPOConfig(lr=1e-4, fan_in_lr_ref=128))
+    scale_of = {id(p): g["lr_scale"] for g in ppo.optimizer.param_groups for p in g["params"]}
+    heads = policy.heads
+    assert scale_of[id(heads.trunk[0].weight)] == pytest.approx(128 / 2096)
+    assert scale_of[id(heads.trunk[3].weight)] == pytest.approx(128 / 512)
+    assert scale_of[id(heads.trunk[0].bias)] == 1.0  # biases and norms keep the lr
+    assert scale_of[id(heads.actor[-1].weight)] == 1.0  # fan-in 64 <= 128
+    assert sum(len(g["params"]) for g in ppo.optimizer.param_groups) == len(list(policy.parameters()))
+    for g in ppo.optimizer.param_groups:
+        assert g["lr"] == pytest.approx(1e-4 * g["lr_scale"])
+    ppo._set_lr(0.0)  # the KL rule moves every group's lr together
+    for g in ppo.optimizer.param_groups:
+        assert g["lr"] == pytest.approx(1.5e-4 * g["lr_scale"])
+    # One Adam step moves the wide layer's weights by about its scaled lr.
+    before = heads.trunk[0].weight.detach().clone()
+    ppo.optimizer.zero_grad()
+    policy(torch.randn(8, 17, 128), torch.randn(8, 48))[0].sum().backward()
+    ppo.optimizer.step()
+    moved = (heads.trunk[0].weight.detach() - before).abs()
+    assert moved.max().item() == pytest.approx(1.5e-4 * 128 / 2096, rel=1e-3)
+
+
+def test_fan_in_lr_scaling_off_is_one_group_and_saved_states_must_agree():
+    policy = _FlatPolicy()
+    plain = PPO(policy, PPOConfig())
+    assert [g["lr_scale"] for g in plain.optimizer.param_groups] == [1.0]
+    scaled = PPO(_FlatPolicy(), PPOConfig(fan_in_lr_ref=2))
+    assert len(scaled.optimizer.param_groups) > 1
+    with pytest.raises(ValueError, match="fan_in_lr_ref"):
+        scaled.load_state_dict(plain.state_dict())
+    # A state saved without lr_scale (before the option) loads into a run with it off.
+    old = plain.state_dict()
+    old = {"optimizer": {**old["optimizer"], "param_groups": [
+        {k: v for k, v in g.items() if k != "lr_scale"} for g in old["optimizer"]["param_groups"]]},
+        "lr": 2e-4}
+    again = PPO(_FlatPolicy(), PPOConfig())
+    again.load_state_dict(old)
+    assert again.optimizer.param_groups[0]["lr"] == pytest.approx(2e-4)
+    with pytest.raises(ValueError, match="fan_in_lr_ref"):
+        PPO(_FlatPolicy(), PPOConfig(fan_in_lr_ref=-1))
