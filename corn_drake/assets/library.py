@@ -69,13 +69,34 @@ def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:
                          f"{key} file {path} ({e})") from None
 
 
-def _save(out: Path, manifest: Manifest, seed: int) -> None:
+def _save(out: Path, manifest: Manifest, seed: int,
+          planned: list[LibraryObject] | None = None) -> None:
     # The split depends on how many members each family has: re-assign it over the whole manifest
     # so a manifest on disk is always split as a complete build with these objects would be.
-    assign_splits(manifest.objects, seed)
-    manifest.split_rule = {"seed": seed, "unseen_families": sorted(UNSEEN_FAMILIES),
-                           "member_fraction": MEMBER_FRACTION}
+    # A build of one split only (`planned`: every object the full build would make) takes each
+    # object's split from the planned set instead, where its family's other members are.
+    assign_splits(planned if planned is not None else manifest.objects, seed)
+    rule = {"seed": seed, "unseen_families": sorted(UNSEEN_FAMILIES),
+            "member_fraction": MEMBER_FRACTION}
+    if planned is not None:
+        by_id = {o.id: o for o in planned}
+        extra = [o.id for o in manifest.objects if o.id not in by_id]
+        if extra:
+            raise InputError(f"{manifest_path(out)} holds objects beyond the {len(planned)} "
+                             f"planned ({', '.join(extra[:5])}...): build it with its own --num")
+        for o in manifest.objects:
+            o.split, o.unseen_group = by_id[o.id].split, by_id[o.id].unseen_group
+        rule["split_over_planned"] = len(planned)
+    manifest.split_rule = rule
     write_manifest(out, manifest)
+
+
+def planned_procedural(num: int) -> list[LibraryObject]:
+    """The (id, family) of every object a procedural build of `num` makes, in build order: object
+    i is member i // F of the i % F-th family (F families, sorted), whatever else is built."""
+    families = sorted(FAMILIES)
+    return [LibraryObject(id=f"{families[i % len(families)]}_{i // len(families):03d}",
+                          family=families[i % len(families)]) for i in range(num)]
 
 
 def _load_or_new(out: Path) -> Manifest:
@@ -107,20 +128,34 @@ def _add(out: Path, manifest: Manifest, entry: LibraryObject, rng, mesh, convex,
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
-                     progress: bool = True) -> Manifest:
+                     progress: bool = True, split: str | None = None) -> Manifest:
+    """Builds (or resumes) the procedural library of `num` objects at `seed` in `out`.
+
+    `split` ("train" or "unseen") builds only the objects of that split of the full build, each
+    identical to its full-build self (an object's mesh and processing depend on (seed, id) only);
+    their split is the full build's, computed over all `num` planned objects. That holds while
+    no other object of their family is rejected (none of the 80 at seed 0 is): a rejection shrinks
+    the family, which a full build would split anew. Building the rest later (the same command
+    without `split`) completes the library."""
     from tqdm import tqdm
 
     out, cfg = Path(out), cfg or ProcessConfig()
+    if split not in (None, "train", "unseen"):
+        raise InputError(f"split must be 'train' or 'unseen', got {split!r}")
+    planned = planned_procedural(num)
+    wanted = None
+    if split is not None:
+        assign_splits(planned, seed)
+        wanted = {o.id for o in planned if o.split == split}
+    # Without `split`, the split is over what was built, as always.
+    plan = planned if split is not None else None
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_or_new(out)
     done = {o.id for o in manifest.objects} | {r.source for r in manifest.rejected}
-    families = sorted(FAMILIES)
     t0 = time.perf_counter()
-    for i in tqdm(range(num), disable=not progress, desc="objects"):
-        family = families[i % len(families)]
-        member = i // len(families)
-        object_id = f"{family}_{member:03d}"
-        if object_id in done:
+    for entry_plan in tqdm(planned, disable=not progress, desc="objects"):
+        object_id, family = entry_plan.id, entry_plan.family
+        if object_id in done or (wanted is not None and object_id not in wanted):
             continue
         obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
         rng = np.random.default_rng(obj_seed)
@@ -131,9 +166,9 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
             manifest.rejected.append(Rejection(entry.source, str(e)))
             continue
         _add(out, manifest, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
-        _save(out, manifest, seed)  # after every object: a killed run resumes here
+        _save(out, manifest, seed, plan)  # after every object: a killed run resumes here
     manifest.timings["build_s"] = manifest.timings.get("build_s", 0.0) + time.perf_counter() - t0
-    _save(out, manifest, seed)
+    _save(out, manifest, seed, plan)
     return manifest
 
 

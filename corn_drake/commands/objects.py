@@ -24,6 +24,11 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=nonnegative_int, default=0)
     parser.add_argument("--drops", type=positive_int, default=128,
                         help="drops per object for stable poses")
+    parser.add_argument("--split", choices=("train", "unseen"), default=None,
+                        help="procedural only: build just the objects of this split of the full "
+                             "--num build, identical to theirs (e.g. the unseen objects to "
+                             "evaluate shipped weights on); the same command without --split "
+                             "completes the library later")
     parser.add_argument("--out", required=True)
     parser.add_argument("--no-progress", action="store_true")
 
@@ -74,6 +79,7 @@ def _stable_pose_summary(objects: list[LibraryObject]) -> list[str]:
 def run(args) -> int:
     from corn_drake.assets.library import build_procedural, ingest_folder
     from corn_drake.assets.process import ProcessConfig
+    from corn_drake.errors import InputError
     from corn_drake.run_folder import lock_folder, resume_arguments
 
     cfg = ProcessConfig()
@@ -81,8 +87,12 @@ def run(args) -> int:
     with lock_folder(args.out):
         resume_arguments(args.out, output_arguments(args), may_grow=("--num",))
         if args.source == "procedural":
-            manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress)
+            manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress,
+                                        args.split)
         else:
+            if args.split is not None:
+                raise InputError(f"--split {args.split} builds part of a procedural library; "
+                                 f"--source {args.source} ingests every mesh of a folder")
             manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
     print(_split_summary(manifest.objects) + f", {len(manifest.rejected)} rejected; "
           f"manifest {args.out}/manifest.json")
