@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from corn_drake.cli import build_parser, main
-from corn_drake.commands.demo import TASK
+from corn_drake.commands.demo import SHIPPED_TEACHER, TASK
+from corn_drake.package_data import data_dir
 from corn_drake.run_config import load_run_config
 
 pytestmark = pytest.mark.slow
@@ -76,6 +77,16 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     assert all(e["position_error"] >= 0.0 and e["steps"] > 0 for e in evaluation["episodes"])
     recordings = list((tmp_path / "eval_corn_recordings").glob("*.html"))
     assert recordings and all(_is_meshcat_html(p) for p in recordings)
+
+    # The shipped teacher, on its own task (push), with its attention in the recording.
+    shipped = _report(tmp_path / "eval_shipped_corn.json")
+    card = json.loads((data_dir("models") / "weights" / SHIPPED_TEACHER / "card.json").read_text())
+    assert shipped["policy"] == card["policy"] == "corn" and shipped["task"] == card["task"]
+    assert len(shipped["episodes"]) == args.eval_episodes
+    assert set(shipped["per_object"]) <= unseen
+    shipped_recordings = list((tmp_path / "eval_shipped_corn_recordings").glob("*.html"))
+    assert shipped_recordings and all(_is_meshcat_html(p) for p in shipped_recordings)
+    assert "attention" in shipped_recordings[0].read_text(errors="replace")
 
     assert _is_meshcat_html(tmp_path / "scripted_push.html")
     sim = _report(tmp_path / "bench_sim.json")["results"]

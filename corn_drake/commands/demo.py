@@ -3,7 +3,10 @@
 1. object library: one procedural object per family (train + unseen families);
 2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
 4. PPO teacher (`corn` policy, frozen encoder) on the planar task over the train objects;
-5. evaluation in the evaluation diagram on an unseen object, recorded to Meshcat HTML;
+5. evaluation in the evaluation diagram on an unseen object, recorded to Meshcat HTML: the
+   teacher just trained (a few thousand steps: the path works, the policy is not trained), then
+   the shipped push teacher (models/weights/push_corn, a real training run) on the push task with
+   its attention painted on the object;
 plus a scripted push recording and the simulation-speed report. Every stage writes under --out
 and is skipped when its output is already complete, so a killed demo resumes.
 """
@@ -18,6 +21,8 @@ from corn_drake.cli_types import nonnegative_int, positive_int
 
 # The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
 TASK = "planar"
+# The shipped weights (models/weights/NAME) the demo evaluates after its own short training.
+SHIPPED_TEACHER = "push_corn"
 
 NAME = "demo"
 HELP = "run the pipeline end to end at a small default size; prints where each output went"
@@ -52,6 +57,7 @@ def run(args) -> int:
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.diagrams import load_teacher_config
     from corn_drake.evaluation import run_episode
+    from corn_drake.package_data import data_dir
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.scripted import ScriptedPushAgent
 
@@ -101,6 +107,15 @@ def run(args) -> int:
          "--episodes", str(args.eval_episodes), "--record", "1", "--report", str(report)])
     outputs["evaluation report"] = report
     outputs["evaluation recording (Meshcat HTML)"] = out / "eval_corn_recordings"
+    # The shipped teacher on the demo library's unseen objects: held-out families, the same
+    # shapes as its card's (stable poses from the demo's fewer drops), on its own push task.
+    shipped = data_dir("models") / "weights" / SHIPPED_TEACHER
+    shipped_report = out / "eval_shipped_corn.json"
+    cli(["evaluate", "--run", str(shipped), "--objects", str(library), "--split", "unseen",
+         "--episodes", str(args.eval_episodes), "--record", "1", "--attention",
+         "--report", str(shipped_report)])
+    outputs["shipped teacher's evaluation (card: models/weights/push_corn/card.json)"] = shipped_report
+    outputs["its recording, attention coloured (Meshcat HTML)"] = out / "eval_shipped_corn_recordings"
 
     _stage("6/6 scripted push + simulation speed", outputs, t0)
     env = TeacherEnv(load_teacher_config(), meshcat=Meshcat())

@@ -12,9 +12,19 @@ from corn_drake.rl.encoders import load_encoder
 from corn_drake.run_config import load_run_config
 
 
+def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
+    """The encoder file a run's config names. `train` records --encoder as given (relative to
+    where it ran); shipped weights (models/weights/, `corn-drake ship`) name theirs relative to
+    their own folder, so a relative path that exists there is taken from there."""
+    if encoder and not Path(encoder).is_absolute() and (Path(run_dir) / encoder).is_file():
+        return str(Path(run_dir) / encoder)
+    return encoder
+
+
 def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
+    cfg.encoder = run_encoder_path(run_dir, cfg.encoder)  # what distill's student starts from too
     ckpt = run_dir / "checkpoints" / "last.pt"
     state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
     if state is None:

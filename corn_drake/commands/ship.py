@@ -1,0 +1,139 @@
+"""`corn-drake ship`: copy a trained teacher into a self-contained weights folder with its card.
+
+    corn-drake ship --run runs/push_corn --report docs/results/eval_push_corn_unseen.json \
+        --library-command "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen" \
+        --out models/weights/push_corn
+
+OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, and nothing more:
+
+- config.yaml: the run's config, its encoder named relative to OUT (rl/checkpoints.py
+  run_encoder_path) and its object library replaced by the library command's --out;
+- checkpoints/last.pt: the agent's weights only (no optimiser, RNG or history: a shipped folder
+  evaluates and teaches; `train` does not resume it);
+- encoder.pt: the frozen encoder the policy reads (corn, pn, p2v-lite, rot), copied;
+- card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
+  `evaluate` report of this very run on the unseen split, kept in docs/results/), the
+  `library_command` that rebuilds those objects and the `library_seed`, `evaluate_command`,
+  `train_command` (as given), `source_run`, and the file sizes.
+
+The report must be of this run or of OUT (its `run` field: the same weights), on unseen objects
+and without overrides, so a card cannot quote another policy's or another task's number.
+"""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+NAME = "ship"
+HELP = "copy a trained teacher run into a self-contained weights folder with a JSON card"
+
+
+def add_arguments(parser):
+    parser.add_argument("--run", required=True, help="the `corn-drake train` run folder")
+    parser.add_argument("--report", required=True,
+                        help="`corn-drake evaluate` report of this run on the unseen split")
+    parser.add_argument("--library-command", required=True,
+                        help="the `corn-drake objects` command that rebuilds the evaluated "
+                             "objects (its --out becomes the shipped config's library)")
+    parser.add_argument("--train-command", default="",
+                        help="the command that trained the run, recorded on the card")
+    parser.add_argument("--out", required=True, help="weights folder, e.g. models/weights/push_corn")
+
+
+def library_arguments(command: str) -> dict[str, str]:
+    """--num/--seed/--out/--split of a `corn-drake objects` command line; anything else is an
+    InputError naming --library-command."""
+    from corn_drake.errors import InputError
+
+    words = shlex.split(command)
+    if words[:2] != ["corn-drake", "objects"]:
+        raise InputError(f"--library-command must be a `corn-drake objects ...` command, got "
+                         f"{command!r}")
+    values, key = {}, None
+    for w in words[2:]:
+        if key is not None:
+            values[key], key = w, None
+        elif w.startswith("--") and "=" in w:
+            k, v = w.split("=", 1)
+            values[k] = v
+        elif w.startswith("--"):
+            key = w
+    if "--out" not in values:
+        raise InputError(f"--library-command {command!r} has no --out")
+    return values
+
+
+def _check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
+    from corn_drake.errors import InputError
+
+    for key in ("success_rate", "episodes", "run", "split", "policy"):
+        if key not in report:
+            raise InputError(f"--report {path}: no {key!r}; is it a `corn-drake evaluate` report?")
+    if Path(report["run"]).resolve() not in {Path(r).resolve() for r in runs}:
+        raise InputError(f"--report {path} evaluated run {report['run']!r}, not --run {runs[0]} "
+                         f"(or the shipped {runs[1]})")
+    if report["split"] != "unseen":
+        raise InputError(f"--report {path} is on the {report['split']!r} split; a card quotes "
+                         "the unseen objects' success")
+    if report.get("overrides"):
+        raise InputError(f"--report {path} was run with overrides ({report['overrides']}); a card "
+                         "quotes the run on its own task")
+
+
+def run(args) -> int:
+    import shutil
+
+    import torch
+
+    from corn_drake.errors import InputError, MissingInputError
+    from corn_drake.io_utils import atomic_path, read_json, write_json
+    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.run_config import write_run_config
+    from corn_drake.io_utils import load_checkpoint
+
+    run_dir, out = Path(args.run), Path(args.out)
+    if out.resolve() == run_dir.resolve():
+        raise InputError(f"--out {out} is the run folder itself")
+    report = read_json(args.report, "--report")
+    _check_report(report, (args.run, args.out), args.report)
+    library = library_arguments(args.library_command)
+    cfg, agent = load_run(run_dir)  # the run must load as evaluate would load it
+    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", required=("agent", "global_step"))
+    if state is None:
+        raise MissingInputError(f"--run {run_dir}: no checkpoint")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "checkpoints").mkdir(exist_ok=True)
+    encoder_card = None
+    if cfg.encoder:
+        with atomic_path(out / "encoder.pt") as tmp:
+            shutil.copyfile(cfg.encoder, tmp)
+        cfg.encoder = "encoder.pt"
+        # Its pretraining record (contact F1 or pretext skill), as the encoder file holds it.
+        encoder_card = {"file": "encoder.pt", "kind": agent.encoder.kind,
+                        "pretraining": getattr(agent.encoder, "pretraining", None)}
+    if cfg.env.scene.object.kind == "library":
+        cfg.env.scene.object.library = library["--out"]
+    write_run_config(cfg, out)
+    with atomic_path(out / "checkpoints" / "last.pt") as tmp:
+        torch.save({"agent": state["agent"], "global_step": state["global_step"]}, tmp)
+    sizes = {p.relative_to(out).as_posix(): p.stat().st_size
+             for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
+    card = {
+        "policy": cfg.policy, "task": cfg.env.task.name, "env_steps": int(state["global_step"]),
+        "success_rate": report["success_rate"],
+        "balanced_success_rate": report.get("balanced_success_rate"),
+        "episodes": len(report["episodes"]), "split": "unseen",
+        "report": args.report, "library_command": args.library_command,
+        "library_seed": int(library.get("--seed", 0)),
+        "evaluate_command": (f"corn-drake evaluate --run {out.as_posix()} --objects "
+                             f"{library['--out']} --split unseen --episodes "
+                             f"{len(report['episodes'])} --report eval.json"),
+        "train_command": args.train_command, "source_run": str(args.run),
+        "actions": report.get("actions", "mean"), "encoder": encoder_card, "bytes": sizes,
+    }
+    write_json(out / "card.json", card)
+    print(f"shipped {args.run} to {out}: {cfg.policy} on {cfg.env.task.name}, "
+          f"{card['env_steps']} steps, unseen success {card['success_rate']:.3f} over "
+          f"{card['episodes']} episodes; {sum(sizes.values()) / 1e6:.1f} MB")
+    return 0

@@ -1,0 +1,59 @@
+"""Pieces of the gallery stills and of `corn-drake ship`, without a simulation."""
+
+import numpy as np
+import pytest
+
+from corn_drake.commands.gallery import montage
+from corn_drake.commands.ship import _check_report, library_arguments
+from corn_drake.errors import InputError
+from corn_drake.viz.gallery import _pick_steps, paint
+
+
+def test_paint_colours_only_points_the_depth_image_shows():
+    image = np.zeros((20, 30, 3), np.uint8)
+    depth = np.full((20, 30), 1.0)
+    depth[:, 15:] = 0.5  # a nearer surface covers the right half
+    pixels = np.array([[5.0, 5.0], [20.0, 5.0], [20.0, 15.0], [-3.0, 5.0], [5.0, 12.0]])
+    z = np.array([1.0, 0.8, 0.5, 1.0, -1.0])  # visible, hidden behind, on it, outside, behind cam
+    colours = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9], [7, 7, 7]], np.uint8)
+    out, painted = paint(image, depth, pixels, z, colours, radius=1)
+    assert painted == 2
+    assert tuple(out[5, 5]) == (255, 0, 0) and tuple(out[15, 20]) == (0, 0, 255)
+    assert tuple(out[5, 20]) == (0, 0, 0)  # the hidden point left no colour
+    assert tuple(out[12, 5]) == (0, 0, 0)
+    assert (image == 0).all()  # the input is not drawn on
+
+
+def test_pick_steps_and_montage():
+    assert _pick_steps("start,middle,end", 101) == [0, 50, 100]
+    assert _pick_steps("3", 10) == [3]
+    with pytest.raises(ValueError, match="outside"):
+        _pick_steps("12", 10)
+    a, b = np.zeros((4, 5, 3), np.uint8), np.ones((4, 5, 3), np.uint8)
+    m = montage([a, b])
+    assert m.shape == (4, 18, 3) and (m[:, 5:13] == 255).all()
+
+
+def test_library_command_is_parsed_and_checked():
+    args = library_arguments("corn-drake objects --num 80 --seed=3 --split unseen --out data/x")
+    assert args == {"--num": "80", "--seed": "3", "--split": "unseen", "--out": "data/x"}
+    with pytest.raises(InputError, match="corn-drake objects"):
+        library_arguments("python build.py --out x")
+    with pytest.raises(InputError, match="no --out"):
+        library_arguments("corn-drake objects --num 8")
+
+
+def test_a_card_quotes_only_its_own_runs_unseen_report(tmp_path):
+    report = {"success_rate": 0.5, "episodes": [{}], "run": str(tmp_path / "run"),
+              "split": "unseen", "policy": "corn", "overrides": []}
+    runs = (str(tmp_path / "run"), str(tmp_path / "shipped"))
+    _check_report(report, runs, "r.json")
+    _check_report({**report, "run": str(tmp_path / "shipped")}, runs, "r.json")
+    with pytest.raises(InputError, match="evaluated run"):
+        _check_report({**report, "run": str(tmp_path / "other")}, runs, "r.json")
+    with pytest.raises(InputError, match="split"):
+        _check_report({**report, "split": "train"}, runs, "r.json")
+    with pytest.raises(InputError, match="overrides"):
+        _check_report({**report, "overrides": [{"key": "env.task.name"}]}, runs, "r.json")
+    with pytest.raises(InputError, match="success_rate"):
+        _check_report({k: v for k, v in report.items() if k != "success_rate"}, runs, "r.json")

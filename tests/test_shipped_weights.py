@@ -1,0 +1,98 @@
+"""The weights shipped in models/weights/: each card says what its folder holds and quotes a
+report in docs/results/; the shipped corn teacher, evaluated from a fresh library build, replays
+its card's episodes."""
+
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+import torch
+
+from corn_drake.cli import main
+from corn_drake.commands.ship import library_arguments
+from corn_drake.package_data import data_dir
+from corn_drake.run_config import load_run_config
+
+REPO = Path(__file__).resolve().parents[1]
+WEIGHTS = data_dir("models") / "weights"
+CARDS = sorted(WEIGHTS.glob("*/card.json"))
+CARD_KEYS = ("policy", "task", "env_steps", "success_rate", "episodes", "report",
+             "library_command", "library_seed", "evaluate_command", "bytes")
+MAX_TOTAL_BYTES = 25_000_000  # what the repository carries (issue 17)
+
+
+def _card(path: Path) -> dict:
+    return json.loads(path.read_text())
+
+
+def test_a_corn_teacher_is_shipped_and_the_folder_stays_small():
+    assert any(_card(p)["policy"] == "corn" for p in CARDS), CARDS
+    total = sum(p.stat().st_size for p in WEIGHTS.rglob("*") if p.is_file())
+    assert total < MAX_TOTAL_BYTES, total
+
+
+@pytest.mark.parametrize("card_path", CARDS, ids=[p.parent.name for p in CARDS])
+def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
+    card, folder = _card(card_path), card_path.parent
+    assert all(k in card for k in CARD_KEYS), set(CARD_KEYS) - set(card)
+    report_path = REPO / card["report"]
+    assert report_path.parent == REPO / "docs" / "results", card["report"]
+    report = json.loads(report_path.read_text())
+    assert card["success_rate"] == report["success_rate"]
+    assert card["episodes"] == len(report["episodes"]) and report["split"] == "unseen"
+    assert report["policy"] == card["policy"] and report["task"] == card["task"]
+    assert not report.get("overrides")
+    state = torch.load(folder / "checkpoints" / "last.pt", weights_only=False)
+    assert state["global_step"] == card["env_steps"]
+    assert card["bytes"] == {p.relative_to(folder).as_posix(): p.stat().st_size
+                             for p in sorted(folder.rglob("*"))
+                             if p.is_file() and p.name != "card.json"}
+    cfg = load_run_config(folder)
+    assert cfg.policy == card["policy"] and cfg.env.task.name == card["task"]
+    library = library_arguments(card["library_command"])
+    assert cfg.env.scene.object.library == library["--out"]
+    assert int(library.get("--seed", 0)) == card["library_seed"]
+    if cfg.encoder:  # named relative to the folder, so the folder works wherever it lies
+        assert (folder / cfg.encoder).is_file()
+
+
+@pytest.mark.slow
+def test_shipped_corn_replays_its_cards_episodes_from_a_fresh_library(tmp_path):
+    """The card's library command, cut to the two held-out-family objects (`--num 14` plans
+    one object per family: bottle_000 and wedge_000, identical to the 80-object build's), then
+    `evaluate --run models/weights/<corn>` as the README gives it: every episode equals the
+    card report's episode of the same object and seed."""
+    card_path = next(p for p in CARDS if _card(p)["policy"] == "corn")
+    card = _card(card_path)
+    words = shlex.split(card["library_command"])
+    library = library_arguments(card["library_command"])
+    argv = words[1:]
+    argv[argv.index("--num") + 1] = "14"
+    argv[argv.index("--out") + 1] = str(tmp_path / "lib")
+    assert library["--split"] == "unseen"
+    assert main(argv + ["--no-progress"]) == 0
+    report_path = tmp_path / "eval.json"
+    assert main(["evaluate", "--run", str(card_path.parent), "--objects", str(tmp_path / "lib"),
+                 "--episodes", "4", "--record", "0", "--report", str(report_path)]) == 0
+    replay = json.loads(report_path.read_text())
+    shipped = {(r["object"], r["seed"]): r for r in
+               json.loads((REPO / card["report"]).read_text())["episodes"]}
+    assert {r["object"] for r in replay["episodes"]} == {"bottle_000", "wedge_000"}
+    for row in replay["episodes"]:
+        ref = shipped[(row["object"], row["seed"])]
+        assert (row["success"], row["steps"]) == (ref["success"], ref["steps"]), row
+        assert row["position_error"] == pytest.approx(ref["position_error"], abs=1e-6)
+
+    # The gallery's stills of bottle_000 come from that same episode (stepped from Python
+    # with act_and_attend), with the object's visible points painted in every still.
+    gallery = tmp_path / "gallery"
+    assert main(["gallery", "--run", str(card_path.parent), "--objects", str(tmp_path / "lib"),
+                 "--ids", "bottle_000", "--out", str(gallery)]) == 0
+    entry = json.loads((gallery / "gallery.json").read_text())["episodes"][0]
+    first = next(r for r in replay["episodes"] if r["object"] == "bottle_000")
+    assert (entry["seed"], entry["success"], entry["steps"]) == \
+        (first["seed"], first["success"], first["steps"])
+    assert entry["position_error"] == pytest.approx(first["position_error"], abs=1e-6)
+    assert (gallery / entry["image"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(entry["points_painted"]) == 3 and min(entry["points_painted"]) > 10
