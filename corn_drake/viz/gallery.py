@@ -26,7 +26,7 @@ from corn_drake.contract import POSITION_DIM
 # The eye looks at the midpoint of the object's start and goal from the side of the push (the
 # hand pushes along start -> goal, so from behind or in front it would hide the object), on
 # the side away from the robot's base (which stands at -x), EYE_SIDE out and EYE_UP above.
-EYE_SIDE, EYE_UP = 0.45, 0.32
+EYE_SIDE, EYE_UP = 0.5, 0.14
 WIDTH, HEIGHT, FOV_Y_DEG = 640, 480, 45.0
 GOAL_COLOUR = np.array([230, 30, 30], np.uint8)
 POINT_RADIUS_PX = 3
