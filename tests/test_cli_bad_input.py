@@ -116,6 +116,17 @@ ROWS = [
          "{root}/lib/manifest.json", "unit_inertia"),
     # curves
     _row("curves --run {root}/nowhere --out {root}/out/c.png", "{root}/nowhere"),
+    # ship / gallery (shipped weights, issue 17) and objects --split
+    _row("ship --run {root}/run_no_history --report {root}/nowhere.json --library-command x "
+         "--out {root}/out/w", "--report", "{root}/nowhere.json"),
+    _row("ship --run {root}/run_no_history --report {root}/lib_garbage/manifest.json "
+         "--library-command x --out {root}/out/w", "--report"),
+    _row("ship --run {root}/run_no_history --report {root}/lib_no_objects/manifest.json "
+         "--library-command x --out {root}/out/w", "--report", "success_rate"),
+    _row("gallery --run {root}/nowhere --objects {root}/lib --out {root}/out/g",
+         "{root}/nowhere/config.yaml"),
+    _row("gallery --run scripted --objects {root}/lib --out {root}/out/g", "scripted/config.yaml"),
+    _row(f"objects --source {{root}}/lib --split unseen {OUT}", "--split unseen", "--source"),
     _row("curves --run {root}/run_garbage_metrics --out {root}/out/c.png",
          "{root}/run_garbage_metrics/metrics.json"),
     _row("curves --run {root}/run_no_history --out {root}/out/c.png", "{root}/run_no_history/metrics.json"),

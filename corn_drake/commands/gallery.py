@@ -49,7 +49,6 @@ def run(args) -> int:
     from corn_drake.viz.gallery import episode_stills, save_png
 
     out = Path(args.out)
-    ensure_writable(out, "--out")
     cfg, agent = load_run(args.run)
     # Evaluate samples each object's cloud with its --seed as the env seed: the same here.
     env_cfg = dataclasses.replace(cfg.env, seed=args.seed)
@@ -61,6 +60,7 @@ def run(args) -> int:
     unknown = [i for i in ids if i not in known]
     if unknown:
         raise InputError(f"--ids {','.join(unknown)}: not in library {args.objects}")
+    ensure_writable(out, "--out")  # after every check: a refused command writes nothing
     entries = []
     for object_id in ids:
         seed = episode_seed(args.seed, object_id, 0)

@@ -82,6 +82,9 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.run_folder import lock_folder, resume_arguments
 
+    if args.split is not None and args.source != "procedural":  # before OUT is touched
+        raise InputError(f"--split {args.split} builds part of a procedural library; "
+                         f"--source {args.source} ingests every mesh of a folder")
     cfg = ProcessConfig()
     cfg.drops.drops = args.drops
     with lock_folder(args.out):
@@ -90,9 +93,6 @@ def run(args) -> int:
             manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress,
                                         args.split)
         else:
-            if args.split is not None:
-                raise InputError(f"--split {args.split} builds part of a procedural library; "
-                                 f"--source {args.source} ingests every mesh of a folder")
             manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
     print(_split_summary(manifest.objects) + f", {len(manifest.rejected)} rejected; "
           f"manifest {args.out}/manifest.json")
