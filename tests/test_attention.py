@@ -6,10 +6,6 @@ uniformly (every patch near 1/16, changes of ~1e-4), so tests that need a measur
 sharpen it: larger query and key weights make the softmax peaked, as a trained head's is.
 """
 
-import base64
-import re
-
-import msgpack  # installed with ray, a dependency of the project
 import numpy as np
 import pytest
 import torch
@@ -22,6 +18,7 @@ from corn_drake.nn.encoder_io import make_policy_encoder
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.viz.attention_view import step_path, viridis_rgb
+from tests.recordings import attention_in_recording
 
 NUM_PATCHES = 16  # the encoder's patches (spec sheet: 16 FPS centres)
 
@@ -157,34 +154,13 @@ def test_policy_system_attention_port_is_the_agents_own_and_shares_its_forward_p
                                act_and_attend(obs)[1].patch_scores, atol=1e-7)
 
 
-def _meshcat_messages(html: str) -> list[dict]:
-    """The Meshcat commands a StaticHtml recording replays (msgpack, base64 in data URLs)."""
-    return [msgpack.unpackb(base64.b64decode(blob), raw=False, strict_map_key=False)
-            for blob in re.findall(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)", html)]
-
-
-def _attention_in_recording(html: str):
-    """({step path: its set_object message}, {step path: [(frame, visible), ...]})."""
-    objects, tracks = {}, {}
-    for msg in _meshcat_messages(html):
-        if msg["type"] == "set_object" and msg["path"].startswith("/attention/"):
-            objects[msg["path"]] = msg
-        if msg["type"] == "set_animation":
-            for anim in msg["animations"]:
-                if anim["path"].startswith("/attention/"):
-                    (track,) = anim["clip"]["tracks"]
-                    assert (track["name"], track["type"]) == (".visible", "boolean")
-                    tracks[anim["path"]] = [(k["time"], k["value"]) for k in track["keys"]]
-    return objects, tracks
-
-
 def test_recordings_show_each_steps_colours_at_its_step(tmp_path):
     agent = _agent()
     env = TeacherEnv(agent=agent, meshcat=Meshcat(), attention=True)
     policy, view = env.handles.policy, env.diagram.GetSubsystemByName("attention_view")
     first = run_episode(env, seed=1, max_steps=4, record_path=tmp_path / "a.html")
     assert first.steps == 4
-    objects, tracks = _attention_in_recording(first.recording.read_text())
+    objects, tracks = attention_in_recording(first.recording.read_text())
     paths = [step_path(view.path, k) for k in range(5)]  # the start and after each step
     assert sorted(objects) == paths
     fps = 64  # run_episode's StartRecording default
@@ -208,7 +184,7 @@ def test_recordings_show_each_steps_colours_at_its_step(tmp_path):
 
     # A shorter episode after it: nothing of the first one's later steps is left.
     second = run_episode(env, seed=2, max_steps=2, record_path=tmp_path / "b.html")
-    objects, tracks = _attention_in_recording(second.recording.read_text())
+    objects, tracks = attention_in_recording(second.recording.read_text())
     assert sorted(objects) == sorted(tracks) == paths[:3]
 
 
@@ -242,7 +218,7 @@ def test_evaluate_attention_paints_an_e2e_run_and_refuses_others(tmp_path, capsy
     assert main(["evaluate", "--run", str(tmp_path / "e2e"), "--attention", "--episodes", "1",
                  "--record", "1", "--report", str(report)]) == 0
     (html,) = (tmp_path / "e2e_recordings").glob("*.html")
-    objects, tracks = _attention_in_recording(html.read_text())
+    objects, tracks = attention_in_recording(html.read_text())
     assert len(objects) == 4 and sorted(objects) == sorted(tracks)
 
     _write_run(tmp_path / "state", "state")

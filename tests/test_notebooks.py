@@ -16,7 +16,7 @@ RECORDING_NOTEBOOKS = {"01_scene_and_controller.ipynb", "04_teacher_rollout.ipyn
                        "05_perception.ipynb"}
 EXPECTED_FIGURES = {"05_perception.ipynb": ["05_depth_images.png", "05_tracking_error.png"]}
 # How many figures each plotting notebook shows inline (image outputs of its cells).
-INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_results.ipynb": 6}
+INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_results.ipynb": 7}
 NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb"}  # 04 renders a gallery still
 # 02 builds an object library and 03 contact data plus a pretraining run (about 50 and 80 s
 # measured); the others take seconds.
