@@ -87,10 +87,9 @@ def run(args) -> int:
     import torch
 
     from corn_drake.errors import InputError, MissingInputError
-    from corn_drake.io_utils import atomic_path, read_json, write_json
+    from corn_drake.io_utils import atomic_path, load_checkpoint, read_json, write_json
     from corn_drake.rl.checkpoints import load_run
     from corn_drake.run_config import write_run_config
-    from corn_drake.io_utils import load_checkpoint
 
     run_dir, out = Path(args.run), Path(args.out)
     if out.resolve() == run_dir.resolve():
