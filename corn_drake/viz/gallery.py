@@ -9,8 +9,8 @@ position as a red dot. Only points the
 depth image shows are painted: a point behind the object's own surface or behind the hand
 stays hidden, so the colours sit on what the camera sees.
 
-The episode runs in a TeacherEnv stepped from Python with the agent's act_and_attend (the mean
-action), so the scores painted are those of the observation each action was chosen from; the
+The episode runs in a TeacherEnv stepped by evaluation.run_episode with the agent's
+act_and_attend (the mean action), so the scores painted are those of the observation each action was chosen from; the
 render diagram is a second copy of the scene whose positions are set from the env's plant.
 """
 
@@ -115,24 +115,22 @@ def episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middl
     """Runs one episode of `agent` (mean actions) on `spec` in the env of `cfg` (a
     TeacherDiagramConfig) and renders the stills of `steps_wanted` ("start", "middle", "end",
     or step numbers). Returns (stills, episode summary)."""
+    from corn_drake.evaluation import run_episode
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.viz.attention_view import viridis_rgb
 
     env = TeacherEnv(cfg, spec)
-    obs, _ = env.reset(seed=seed)
-    frames = []  # (step, plant positions, cloud, point scores) for every observation
-    done, steps, success = False, 0, False
-    while True:
+    frames = []  # (step, plant positions, cloud, point scores) of every observation
+
+    def act_and_keep(obs):
         action, attention = agent.act_and_attend(obs)
-        positions = env.scene.plant.GetPositions(env.scene.plant.GetMyContextFromRoot(env.context))
-        frames.append((steps, positions.copy(), obs["cloud"].reshape(-1, POSITION_DIM).copy(),
-                       attention.point_scores()))
-        if done:
-            break
-        obs, _, terminated, truncated, info = env.step(action)
-        steps += 1
-        success = success or bool(info.get("status", {}).get("success", 0) > 0)
-        done = terminated or truncated
+        frames.append((len(frames), env.scene.plant.GetPositions(env._plant_context).copy(),
+                       obs["cloud"].reshape(-1, POSITION_DIM).copy(), attention.point_scores()))
+        return action
+
+    # evaluate's own episode runner, so the outcome is the one evaluate reports for this seed.
+    result = run_episode(env, act_and_keep, seed=seed)
+    act_and_keep(env._observation())  # the observation the episode ended on: the "end" still
     picks = _pick_steps(steps_wanted, len(frames))
     start, goal = env.episode.initial_object_pose[:3], env.episode.goal_pose[:3]
     camera = StillCamera(cfg.scene, spec, *side_view(start, goal))
@@ -146,8 +144,8 @@ def episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middl
         image, _ = paint(image, np.full(depth.shape, np.inf), goal_pixel, goal_z,
                          GOAL_COLOUR[None], radius=2 * POINT_RADIUS_PX)  # drawn over everything
         stills.append(Still(step, image, painted))
-    summary = {"seed": seed, "steps": steps, "success": success,
-               "position_error": info.get("status", {}).get("position_error") if steps else None}
+    summary = {"seed": seed, "steps": result.steps, "success": result.success,
+               "position_error": result.status.get("position_error")}
     return stills, summary
 
 
