@@ -16,7 +16,7 @@ from corn_drake.cli import main
 from corn_drake.config_distill import DistillConfig
 from corn_drake.contract import STUDENT_OBS_KEYS
 from corn_drake.diagrams_student import load_student_config
-from corn_drake.io_utils import save_checkpoint
+from corn_drake.io_utils import load_checkpoint, save_checkpoint
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.student_env import StudentEnv
 from corn_drake.run_config import write_run_config
@@ -140,7 +140,7 @@ def write_distill_run(folder, episode_steps: int = 3, trained_perception: str = 
     env.segmentation.mode = trained_perception
     write_run_config(DistillConfig(teacher="runs/T", encoder="encoder.pt", env=env), folder)
     save_checkpoint(folder / "checkpoints" / "last.pt",
-                    {"kind": "student", "student": _student(1).state_dict()})
+                    {"kind": "student", "student": _student(1).state_dict(), "global_step": 96})
     return folder
 
 
@@ -177,6 +177,43 @@ def test_evaluate_a_distill_run_reports_perception_and_tracking(tmp_path, capsys
     assert data["perception"] == "ground_truth" and data["episodes"][0]["steps"] <= 2
     assert [o["key"] for o in data["overrides"]] == ["env.task.episode_steps"]
     assert data["tracking"]["steps"] == data["episodes"][0]["steps"]
+
+
+def test_ship_a_student_run_evaluates_as_the_run(tmp_path, capsys):
+    """`ship` of a distill run: the weights folder holds the student alone (its weights carry its
+    encoder), evaluates to the same report as the run, and its card names the perception chain."""
+    from tests.fixtures import write_loadable_library
+
+    library = write_loadable_library(tmp_path / "lib", 1, num_unseen=1)
+    run = write_distill_run(tmp_path / "student", episode_steps=2)
+    args = ["--objects", str(library), "--split", "unseen", "--episodes", "1", "--record", "0"]
+    report = tmp_path / "eval_run.json"
+    assert main(["evaluate", "--run", str(run), *args, "--report", str(report)]) == 0
+    out = tmp_path / "weights" / "student"
+    assert main(["ship", "--run", str(run), "--report", str(report), "--library-command",
+                 f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                 "--out", str(out)]) == 0
+    card = json.loads((out / "card.json").read_text())
+    assert card["policy"] == "student" and card["perception"] == "geometric"
+    assert card["trained_perception"] == "ground_truth" and card["teacher"] == "runs/T"
+    assert card["env_steps"] == 96 and card["episodes"] == 1 and card["cameras"] == "fixed"
+    assert card["encoder"]["file"] is None  # the student's weights hold its encoder
+    assert sorted(card["bytes"]) == ["checkpoints/last.pt", "config.yaml"]
+    assert set(load_checkpoint(out / "checkpoints" / "last.pt")) == {"kind", "student",
+                                                                     "global_step"}
+    again = tmp_path / "eval_shipped.json"
+    assert main(["evaluate", "--run", str(out), *args, "--report", str(again)]) == 0
+    first, second = (json.loads(p.read_text()) for p in (report, again))
+    assert [r["success"] for r in second["episodes"]] == [r["success"] for r in first["episodes"]]
+    assert second["episodes"][0]["position_error"] == pytest.approx(
+        first["episodes"][0]["position_error"], abs=1e-6)
+    # A student's report without a perception chain is refused, naming it.
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps({k: v for k, v in first.items() if k != "perception"}))
+    capsys.readouterr()
+    assert main(["ship", "--run", str(run), "--report", str(bare), "--library-command",
+                 f"corn-drake objects --out {library}", "--out", str(tmp_path / "w2")]) == 2
+    assert "perception" in capsys.readouterr().err
 
 
 def _one_error_line(capsys, *needles: str) -> None:

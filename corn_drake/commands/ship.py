@@ -1,4 +1,5 @@
-"""`corn-drake ship`: copy a trained teacher into a self-contained weights folder with its card.
+"""`corn-drake ship`: copy a trained teacher or student into a self-contained weights folder
+with its card.
 
     corn-drake ship --run runs/push_corn --report docs/results/eval_push_corn_unseen.json \
         --library-command "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen" \
@@ -9,7 +10,9 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
 - config.yaml: the run's config, its encoder named relative to OUT (rl/checkpoints.py
   run_encoder_path) and its object library replaced by the library command's --out;
 - checkpoints/last.pt: the agent's weights only (no optimiser, RNG or history: a shipped folder
-  evaluates and teaches; `train` does not resume it);
+  evaluates and teaches; `train` does not resume it). A student (a `distill` run) ships its
+  {"kind": "student", "student": ...} weights, which hold its encoder, and its config keeps the
+  teacher it was distilled from as recorded;
 - encoder.pt: the frozen encoder the policy reads (corn, pn, p2v-lite, rot), copied;
 - card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
   `evaluate` report of this very run on the unseen split, kept in docs/results/), the
@@ -17,7 +20,8 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
   `train_command` (as given), `source_run`, and the file sizes.
 
 The report must be of this run or of OUT (its `run` field: the same weights), on unseen objects
-and without overrides, so a card cannot quote another policy's or another task's number.
+and without overrides, so a card cannot quote another policy's or another task's number; a
+student's card also names the report's perception chain (`perception`).
 """
 
 from __future__ import annotations
@@ -26,11 +30,12 @@ import shlex
 from pathlib import Path
 
 NAME = "ship"
-HELP = "copy a trained teacher run into a self-contained weights folder with a JSON card"
+HELP = "copy a trained teacher or student run into a self-contained weights folder with a JSON card"
 
 
 def add_arguments(parser):
-    parser.add_argument("--run", required=True, help="the `corn-drake train` run folder")
+    parser.add_argument("--run", required=True,
+                        help="the `corn-drake train` (teacher) or `distill` (student) run folder")
     parser.add_argument("--report", required=True,
                         help="`corn-drake evaluate` report of this run on the unseen split")
     parser.add_argument("--library-command", required=True,
@@ -82,14 +87,9 @@ def _check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
 
 
 def run(args) -> int:
-    import shutil
-
-    import torch
-
-    from corn_drake.errors import InputError, MissingInputError
-    from corn_drake.io_utils import atomic_path, load_checkpoint, read_json, write_json
-    from corn_drake.rl.checkpoints import load_run
-    from corn_drake.run_config import write_run_config
+    from corn_drake.commands.evaluate import run_kind
+    from corn_drake.errors import InputError
+    from corn_drake.io_utils import read_json, write_json
 
     run_dir, out = Path(args.run), Path(args.out)
     if out.resolve() == run_dir.resolve():
@@ -97,12 +97,64 @@ def run(args) -> int:
     report = read_json(args.report, "--report")
     _check_report(report, (args.run, args.out), args.report)
     library = library_arguments(args.library_command)
-    cfg, agent = load_run(run_dir)  # the run must load as evaluate would load it
-    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", required=("agent", "global_step"))
-    if state is None:
-        raise MissingInputError(f"--run {run_dir}: no checkpoint")
+    kind = run_kind(args.run)
+    if kind == "distill" and "perception" not in report:
+        raise InputError(f"--report {args.report} records no perception chain; a student's card "
+                         "quotes an evaluation through it")
     out.mkdir(parents=True, exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
+    ship = _ship_student if kind == "distill" else _ship_teacher
+    card = {**ship(run_dir, out, library["--out"]),
+            "success_rate": report["success_rate"],
+            "balanced_success_rate": report.get("balanced_success_rate"),
+            "episodes": len(report["episodes"]), "split": "unseen",
+            "report": args.report, "library_command": args.library_command,
+            "library_seed": int(library.get("--seed", 0)),
+            "evaluate_command": (f"corn-drake evaluate --run {out.as_posix()} --objects "
+                                 f"{library['--out']} --split unseen --episodes "
+                                 f"{len(report['episodes'])} --report eval.json"),
+            "train_command": args.train_command, "source_run": str(args.run),
+            "actions": report.get("actions", "mean")}
+    if kind == "distill":
+        card["perception"] = report["perception"]
+    card["bytes"] = {p.relative_to(out).as_posix(): p.stat().st_size
+                     for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
+    write_json(out / "card.json", card)
+    print(f"shipped {args.run} to {out}: {card['policy']} on {card['task']}, "
+          f"{card['env_steps']} steps, unseen success {card['success_rate']:.3f} over "
+          f"{card['episodes']} episodes; {sum(card['bytes'].values()) / 1e6:.1f} MB")
+    return 0
+
+
+def _weights(run_dir: Path, key: str) -> dict:
+    from corn_drake.errors import MissingInputError
+    from corn_drake.io_utils import load_checkpoint
+
+    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", required=(key, "global_step"))
+    if state is None:
+        raise MissingInputError(f"--run {run_dir}: no checkpoint")
+    return state
+
+
+def _save_weights(out: Path, state: dict) -> None:
+    import torch
+
+    from corn_drake.io_utils import atomic_path
+
+    with atomic_path(out / "checkpoints" / "last.pt") as tmp:
+        torch.save(state, tmp)
+
+
+def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
+    """Writes a teacher run's config, weights and encoder into `out`; its card fields."""
+    import shutil
+
+    from corn_drake.io_utils import atomic_path
+    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.run_config import write_run_config
+
+    cfg, agent = load_run(run_dir)  # the run must load as evaluate would load it
+    state = _weights(run_dir, "agent")
     encoder_card = None
     if cfg.encoder:
         with atomic_path(out / "encoder.pt") as tmp:
@@ -112,27 +164,38 @@ def run(args) -> int:
         encoder_card = {"file": "encoder.pt", "kind": agent.encoder.kind,
                         "pretraining": getattr(agent.encoder, "pretraining", None)}
     if cfg.env.scene.object.kind == "library":
-        cfg.env.scene.object.library = library["--out"]
+        cfg.env.scene.object.library = library
     write_run_config(cfg, out)
-    with atomic_path(out / "checkpoints" / "last.pt") as tmp:
-        torch.save({"agent": state["agent"], "global_step": state["global_step"]}, tmp)
-    sizes = {p.relative_to(out).as_posix(): p.stat().st_size
-             for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
-    card = {
-        "policy": cfg.policy, "task": cfg.env.task.name, "env_steps": int(state["global_step"]),
-        "success_rate": report["success_rate"],
-        "balanced_success_rate": report.get("balanced_success_rate"),
-        "episodes": len(report["episodes"]), "split": "unseen",
-        "report": args.report, "library_command": args.library_command,
-        "library_seed": int(library.get("--seed", 0)),
-        "evaluate_command": (f"corn-drake evaluate --run {out.as_posix()} --objects "
-                             f"{library['--out']} --split unseen --episodes "
-                             f"{len(report['episodes'])} --report eval.json"),
-        "train_command": args.train_command, "source_run": str(args.run),
-        "actions": report.get("actions", "mean"), "encoder": encoder_card, "bytes": sizes,
-    }
-    write_json(out / "card.json", card)
-    print(f"shipped {args.run} to {out}: {cfg.policy} on {cfg.env.task.name}, "
-          f"{card['env_steps']} steps, unseen success {card['success_rate']:.3f} over "
-          f"{card['episodes']} episodes; {sum(sizes.values()) / 1e6:.1f} MB")
-    return 0
+    _save_weights(out, {"agent": state["agent"], "global_step": state["global_step"]})
+    return {"policy": cfg.policy, "task": cfg.env.task.name,
+            "env_steps": int(state["global_step"]), "encoder": encoder_card}
+
+
+def _ship_student(run_dir: Path, out: Path, library: str) -> dict:
+    """Writes a student run's config and weights into `out`; its card fields. The student's
+    weights hold its encoder, so no encoder file travels."""
+    from corn_drake.rl.checkpoints import load_student_run
+    from corn_drake.run_config import write_run_config
+
+    cfg, _ = load_student_run(run_dir)  # the run must load as evaluate would load it
+    state = _weights(run_dir, "student")
+    obj = cfg.env.teacher.scene.object
+    if obj.kind == "library":
+        obj.library = library
+    write_run_config(cfg, out)
+    _save_weights(out, {"kind": "student", "student": state["student"],
+                        "global_step": state["global_step"]})
+    return {"policy": "student", "task": cfg.env.teacher.task.name,
+            "env_steps": int(state["global_step"]), "teacher": cfg.teacher,
+            "trained_perception": cfg.env.segmentation.mode,
+            "cameras": cfg.env.cameras.mode,
+            "encoder": {"file": None, "kind": "corn", "pretrained_from": cfg.encoder,
+                        "pretraining": _pretraining_record(cfg.encoder)}}
+
+
+def _pretraining_record(encoder: str):
+    """The contact-pretraining record of the encoder file a student started from (None when that
+    file is not on this machine: the student's weights do not carry it)."""
+    from corn_drake.nn.encoder_io import load_frozen_encoder
+
+    return load_frozen_encoder(encoder).pretraining if encoder and Path(encoder).is_file() else None
