@@ -57,8 +57,7 @@ class PerceptionHarness:
 
     # --- images and clouds -------------------------------------------------------------------
     def depth_images(self) -> list[np.ndarray]:
-        return [p.Eval(s.GetMyContextFromRoot(self.context)).data.squeeze().copy()
-                for p, s in zip(self.per.rig.depth_ports(), self.per.rig.sensors)]
+        return self.per.rig.depth_images(self.context)
 
     def labels(self) -> np.ndarray:
         """Render labels of the merged cloud's points (camera after camera, row-major pixels)."""

@@ -51,6 +51,27 @@ def test_reset_and_step_return_both_observation_sets(env):
     assert set(info["status"]) >= {"success", "out_of_workspace"}
 
 
+def test_object_poses_and_depth_images_describe_the_current_state(env):
+    env.reset(seed=1)
+    X_est, X_true = env.object_poses()
+    # The tracker starts from the true pose; the truth is the plant's object pose.
+    np.testing.assert_allclose(X_est, X_true, atol=1e-9)
+    np.testing.assert_allclose(X_true[:3, 3], env.episode.initial_object_pose[:3],
+                               atol=1e-3)
+    images = env.depth_images()
+    camera = env.cfg.cameras.camera
+    assert len(images) == len(env.cfg.cameras.eyes)
+    assert all(im.shape == (camera.height, camera.width) for im in images)
+    # Every eye sees the table (about half of each image here); past its edge nothing returns.
+    assert all(0.2 < np.isfinite(im).mean() < 1 for im in images)
+    assert all(np.nanmin(im) >= camera.z_near for im in images)
+    for _ in range(3):
+        env.step(np.zeros(ACTION_DIM))
+    X_est, X_true = env.object_poses()
+    assert env.tracking_error()["translation_error_m"] == pytest.approx(
+        np.linalg.norm(X_est[:3, 3] - X_true[:3, 3]))
+
+
 def test_teacher_observation_matches_teacher_env_and_student_sees_same_state(env):
     teacher_env = TeacherEnv(env.cfg.teacher, spec=env.scene.object_spec)
     s_obs, s_info = env.reset(seed=3)

@@ -92,11 +92,20 @@ class StudentEnv(DiagramEnv):
         return {"student": self._student_obs.read(self.context),
                 "teacher": self._teacher_obs.read(self.context)}
 
-    def tracking_error(self) -> dict[str, float]:
-        """The tracker's current estimate against the object's true pose, with its status."""
+    def object_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """(estimated, true) 4x4 world poses of the object now: the tracker's output, which the
+        student's goal is relative to, and the plant's."""
         X_true = self.scene.plant.EvalBodyPoseInWorld(
             self._plant_context, self.scene.object_body).GetAsMatrix4()
-        X_est = pose7_to_matrix(self._pose_port.Eval(self.context))
+        return pose7_to_matrix(self._pose_port.Eval(self.context)), X_true
+
+    def depth_images(self) -> list[np.ndarray]:
+        """The rig's current depth images (m; +inf where nothing returns), camera by camera."""
+        return self.handles.perception.rig.depth_images(self.context)
+
+    def tracking_error(self) -> dict[str, float]:
+        """The tracker's current estimate against the object's true pose, with its status."""
+        X_est, X_true = self.object_poses()
         translation, rotation = pose_error(X_est, X_true)
         status = dict(zip(TRACKER_STATUS_FIELDS, self._tracker_status_port.Eval(self.context).tolist()))
         return {"translation_error_m": translation, "rotation_error_deg": rotation,

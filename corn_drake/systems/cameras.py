@@ -104,6 +104,12 @@ class CameraRig:
     def depth_ports(self):
         return [s.depth_image_32F_output_port() for s in self.sensors]
 
+    def depth_images(self, root_context) -> list[np.ndarray]:
+        """Each camera's depth image (m; +inf where nothing returns) in the diagram context
+        `root_context`, copied out of Drake's image."""
+        return [port.Eval(sensor.GetMyContextFromRoot(root_context)).data.squeeze().copy()
+                for port, sensor in zip(self.depth_ports(), self.sensors)]
+
 
 def back_projection_info(info: CameraInfo) -> CameraInfo:
     """The intrinsics DepthImageToPointCloud needs to undo RenderEngineVtk's projection.
