@@ -13,11 +13,13 @@ from tests.paths import REPO_ROOT
 # Notebooks that record an episode leave a standalone Meshcat HTML file; the perception
 # notebook also leaves its depth images.
 RECORDING_NOTEBOOKS = {"01_scene_and_controller.ipynb", "04_teacher_rollout.ipynb",
-                       "05_perception.ipynb"}
+                       "05_perception.ipynb", "06_student.ipynb"}
 EXPECTED_FIGURES = {"05_perception.ipynb": ["05_depth_images.png", "05_tracking_error.png"]}
 # How many figures each plotting notebook shows inline (image outputs of its cells).
-INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_results.ipynb": 7}
-NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb"}  # 04 renders a gallery still
+INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_student.ipynb": 2,
+                  "07_results.ipynb": 7}
+# 04 renders a gallery still; 06 runs the student's cameras.
+NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb", "06_student.ipynb"}
 # 02 builds an object library and 03 contact data plus a pretraining run (about 50 and 80 s
 # measured); the others take seconds.
 SLOW = {"02_objects.ipynb", "03_contact_pretraining.ipynb"}
@@ -57,7 +59,7 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     for figure in EXPECTED_FIGURES.get(name, []):
         assert (Path(tmp_path) / figure).is_file(), figure
     assert _image_outputs(nb) == INLINE_FIGURES.get(name, 0)
-    if name == "06_results.ipynb":  # every result is labelled with its side of the fixes
+    if name == "07_results.ipynb":  # every result is labelled with its side of the fixes
         text = _text_outputs(nb)
         assert "before the fidelity fixes" in text and "after the fidelity fixes" in text
         assert "not labelled here" not in text
