@@ -17,7 +17,7 @@ from corn_drake.contract import ACTION_DIM, student_observation_shapes
 from corn_drake.io_utils import load_checkpoint
 from corn_drake.nn.encoder_io import make_policy_encoder, save_encoder
 from corn_drake.nn.student import StudentPolicy
-from corn_drake.rl.dagger import gaussian_kl, window_loss
+from corn_drake.rl.dagger import gaussian_kl, window_loss, window_terms
 
 POINTS = 64
 
@@ -67,6 +67,13 @@ def test_loss_goes_down_on_a_fixed_dataset():
         losses.append(float(loss.detach()))
     assert np.isfinite(losses).all()
     assert losses[-1] < 0.5 * losses[0], losses
+    # The logged action error is the RMS of the mean actions' difference over the window.
+    kl, rms, _ = window_terms(student, obs, starts, student.initial_state(3), teacher_mean,
+                              teacher_log_std)
+    with torch.no_grad():
+        mean = student(obs, student.initial_state(3), starts).mean
+    assert float(rms) == pytest.approx(float(((mean - teacher_mean) ** 2).mean().sqrt()), rel=1e-5)
+    assert float(kl) == pytest.approx(losses[-1], rel=0.2)
 
 
 def test_a_window_gradient_reaches_its_first_step_and_not_the_previous_window():
@@ -110,9 +117,10 @@ def test_distill_refuses_a_missing_teacher_naming_the_flag(tmp_path, capsys):
 def teacher_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("dagger")
     run = root / "teacher"
+    # A log-std away from the student's default 0, so the student's start at the teacher's shows.
     assert cli(["train", "--policy", "state", "--steps", "32", "--envs-per-worker", "2",
-                "--rollout-steps", "16", "--set", "task.episode_steps=10", "--out", str(run),
-                "--no-progress"]) == 0
+                "--rollout-steps", "16", "--set", "task.episode_steps=10", "--init-log-std",
+                "-1.0", "--out", str(run), "--no-progress"]) == 0
     encoder = root / "encoder.pt"
     torch.manual_seed(0)
     save_encoder(encoder, make_policy_encoder("corn"))  # untrained: only with the weak flag
@@ -177,6 +185,9 @@ def test_a_killed_distill_run_resumes_at_its_checkpoint_step(teacher_run, tmp_pa
     assert cfg.total_steps == 40 and cfg.env.segmentation.mode == "ground_truth"
     mean, hidden = student.step({k: v[:, 0] for k, v in _obs(1, 1).items()})
     assert mean.shape == (1, ACTION_DIM) and torch.isfinite(mean).all()
+    # The student's log-std started at the teacher's (-1) and moved by at most ~lr per update.
+    assert student.log_std.detach().numpy() == pytest.approx(np.full(ACTION_DIM, -1.0), abs=0.01)
+    assert all(0 <= r["action_rms_error"] < 2 for r in rows)
     # Up to the kill the run is its seed's: an uninterrupted run of those 2 windows learns the same.
     again = tmp_path / "again"
     assert _distill(teacher, encoder, again, 16) == 0

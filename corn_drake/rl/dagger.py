@@ -67,9 +67,17 @@ def window_loss(student: StudentPolicy, obs: dict[str, torch.Tensor], starts: to
     obs: student keys (B, T, ...); starts (B, T) episode starts; hidden (layers, B, H) the state
     before the window (detached here, so no gradient flows into earlier windows); teacher_mean
     (B, T, A) and teacher_log_std (A,) the teacher's labels of the same steps."""
+    kl, _, hidden_after = window_terms(student, obs, starts, hidden, teacher_mean, teacher_log_std)
+    return kl, hidden_after
+
+
+def window_terms(student: StudentPolicy, obs, starts, hidden, teacher_mean, teacher_log_std):
+    """window_loss's KL, the RMS difference of the two policies' mean actions over the window
+    (detached: what the executed actions differ by, logged beside the KL), and the GRU state."""
     out = student(obs, hidden.detach(), starts)
     kl = gaussian_kl(teacher_mean, teacher_log_std, out.mean, out.log_std)
-    return kl.mean(), out.hidden
+    rms = (out.mean.detach() - teacher_mean).pow(2).mean().sqrt()
+    return kl.mean(), rms, out.hidden
 
 
 def student_tensors(obs: dict[str, np.ndarray], device) -> dict[str, torch.Tensor]:
@@ -95,6 +103,12 @@ class DaggerTrainer:
         # them (a checkpoint's buffers replace these on resume; they are the same values).
         student.set_token_statistics_from_context(teacher.context_normalizer.mean,
                                                   teacher.context_normalizer.var)
+        # The student's state-independent log-std starts at the teacher's: from the default 0,
+        # Adam moves it ~lr per update, and KL(teacher || student) stayed ~3.7 nats for thousands
+        # of updates on the std gap alone (teacher log-std -0.5 over 20 actions), hiding the
+        # mean's progress. A resumed run's checkpoint replaces it.
+        with torch.no_grad():
+            student.log_std.copy_(teacher.log_std.detach().to(student.log_std))
         self.student = student.to(self.device)
         self.optimizer = torch.optim.Adam([p for p in student.parameters() if p.requires_grad],
                                           lr=cfg.lr)
@@ -173,14 +187,15 @@ class DaggerTrainer:
                  "teacher_action_fraction": teacher_steps / (E * self.cfg.window)}
         return batch, obs_np, hidden, starts, stats
 
-    def _update(self, batch) -> float:
-        loss, _ = window_loss(self.student, batch["obs"], batch["starts"], batch["hidden"],
-                              batch["teacher_mean"], self.teacher.log_std.detach())
+    def _update(self, batch) -> tuple[float, float]:
+        """One optimiser step on the window's KL; (KL, RMS mean-action error) before the step."""
+        loss, rms, _ = window_terms(self.student, batch["obs"], batch["starts"], batch["hidden"],
+                                    batch["teacher_mean"], self.teacher.log_std.detach())
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(self.student.parameters(), self.cfg.max_grad_norm)
         self.optimizer.step()
-        return float(loss.detach())
+        return float(loss.detach()), float(rms)
 
     def train(self, progress: bool = True) -> dict:
         from torch.utils.tensorboard import SummaryWriter
@@ -194,11 +209,14 @@ class DaggerTrainer:
         starts = torch.ones(E, dtype=torch.bool, device=self.device)  # every env begins one
         bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
                    desc="distill", unit="step")
-        losses, fractions, sim_errors, episodes_since, t0 = [], [], 0, 0, time.perf_counter()
+        losses, action_errors, fractions = [], [], []
+        sim_errors, episodes_since, t0 = 0, 0, time.perf_counter()
         steps_since = 0
         while self.global_step < cfg.total_steps:
             batch, obs_np, hidden, starts, stats = self._collect(obs_np, hidden, starts)
-            losses.append(self._update(batch))
+            loss, rms = self._update(batch)
+            losses.append(loss)
+            action_errors.append(rms)
             fractions.append(stats["teacher_action_fraction"])
             sim_errors += stats["sim_errors"]
             episodes_since += len(stats["episodes"])
@@ -210,8 +228,8 @@ class DaggerTrainer:
             count_episodes_per_object(self.episodes_per_object, stats["episodes"])
             bar.update(steps)
             if self.update_index % cfg.log_every == 0 or self.global_step >= cfg.total_steps:
-                row = self._log_row(losses, fractions, episodes_since, sim_errors,
-                                    steps_since / (time.perf_counter() - t0))
+                row = self._log_row(losses, action_errors, fractions, episodes_since,
+                                    sim_errors, steps_since / (time.perf_counter() - t0))
                 self.history.append(row)
                 for key, value in row.items():
                     if key not in ("step", "update"):
@@ -219,10 +237,11 @@ class DaggerTrainer:
                 bar.set_postfix(loss=f"{row['loss']:.3f}", success=f"{row['success_rate']:.2f}",
                                 beta=f"{row['beta']:.2f}")
                 if not progress:
-                    print(f"step {self.global_step}: loss {row['loss']:.4f} beta {row['beta']:.2f} "
+                    print(f"step {self.global_step}: loss {row['loss']:.4f} action rms "
+                          f"{row['action_rms_error']:.3f} beta {row['beta']:.2f} "
                           f"success {row['success_rate']:.2f} "
                           f"{row['steps_per_s']:.0f} steps/s", flush=True)
-                losses, fractions, sim_errors, episodes_since = [], [], 0, 0
+                losses, action_errors, fractions, sim_errors, episodes_since = [], [], [], 0, 0
                 steps_since, t0 = 0, time.perf_counter()
             if self.update_index % cfg.checkpoint_every == 0:
                 self._save()
@@ -240,10 +259,13 @@ class DaggerTrainer:
         plot_distill_curves(self.history, self.out / "plots" / "learning_curve.png")
         return metrics
 
-    def _log_row(self, losses, fractions, episodes, sim_errors, steps_per_s) -> dict:
+    def _log_row(self, losses, action_errors, fractions, episodes, sim_errors,
+                 steps_per_s) -> dict:
         recent = self.recent_episodes
         return {"step": self.global_step, "update": self.update_index,
-                "loss": float(np.mean(losses)), "beta": self.beta,
+                "loss": float(np.mean(losses)),
+                "action_rms_error": float(np.sqrt(np.mean(np.square(action_errors)))),
+                "beta": self.beta,
                 "teacher_action_fraction": float(np.mean(fractions)),
                 "steps_per_s": steps_per_s, "episodes": episodes, "sim_errors": sim_errors,
                 "success_rate": recent_mean(recent, "success"),
@@ -263,8 +285,12 @@ def plot_distill_curves(history: list[dict], path: Path) -> None:
     steps = [h["step"] for h in history]
     fig = Figure(figsize=(9, 3.2))
     axes = fig.subplots(1, 2)
-    axes[0].plot(steps, [h["loss"] for h in history])
-    axes[0].set(xlabel="env steps", ylabel="KL(teacher || student)", yscale="log")
+    axes[0].plot(steps, [h["loss"] for h in history], label="KL(teacher || student)")
+    if all("action_rms_error" in h for h in history):
+        axes[0].plot(steps, [h["action_rms_error"] for h in history],
+                     label="RMS mean-action error")
+    axes[0].set(xlabel="env steps", yscale="log")
+    axes[0].legend()
     axes[1].plot(steps, [h["success_rate"] for h in history], label="success")
     axes[1].plot(steps, [h["beta"] for h in history], "--", label="beta")
     axes[1].set(xlabel="env steps", ylabel=f"last {WINDOW} episodes", ylim=(0, 1))
