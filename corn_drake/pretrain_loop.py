@@ -98,6 +98,12 @@ class PretrainLoop:
         """Figures under out/plots/ (optional)."""
 
     @property
+    def contact_head(self) -> nn.Module | None:
+        """The head encoder.pt keeps beside the encoder (nn/encoder_io.load_contact_model):
+        the contact models' (contact/pretrain.py); none for the pretext tasks."""
+        return None
+
+    @property
     def encoder_kind(self) -> str:
         """encoder.pt's kind (nn/encoder_io.ENCODER_KINDS)."""
         return self.cfg.model
@@ -190,6 +196,6 @@ class PretrainLoop:
         write_json(self.out / "metrics.json", metrics)
         save_encoder(self.out / "encoder.pt",
                      NormalizedEncoder(self.encoder_kind, self.model.encoder, self.normalization),
-                     pretraining=metrics)
+                     pretraining=metrics, contact_head=self.contact_head)
         self.write_plots()
         return metrics

@@ -20,8 +20,8 @@ INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_s
                   "07_results.ipynb": 7}
 # 04 renders a gallery still; 06 runs the student's cameras.
 NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb", "06_student.ipynb"}
-# 02 builds an object library and 03 contact data plus a pretraining run (about 50 and 80 s
-# measured); the others take seconds.
+# 02 builds an object library and 03 contact data (about 50 and 30 s measured); 04 and 06 build
+# two unseen objects (about a minute each), the others take seconds.
 SLOW = {"02_objects.ipynb", "03_contact_pretraining.ipynb"}
 NOTEBOOKS = [pytest.param(name, marks=[pytest.mark.slow] if name in SLOW else [])
              for name in sorted(p.name for p in (REPO_ROOT / "notebooks").glob("*.ipynb"))]

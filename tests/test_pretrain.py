@@ -12,8 +12,8 @@ from corn_drake.contact.pretrain import Pretrainer, augment, hand9, patch_labels
 from corn_drake.contact.runner import generate_dataset
 from corn_drake.contract import ENCODER_INPUT_CENTER, ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import (NormalizedEncoder, load_frozen_encoder, make_network,
-                                      save_encoder)
+from corn_drake.nn.encoder_io import (NormalizedEncoder, load_contact_model, load_frozen_encoder,
+                                      make_network, save_encoder)
 from corn_drake.nn.geometry import quat_wxyz_to_matrix
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics
@@ -89,6 +89,13 @@ def test_short_run_learns_resumes_and_exports(data, tmp_path):
         expected = first.model.encoder(pts, hand)
     hand_state = torch.cat([pose[:, :3], hand[:, 3:]], -1)  # world position + the same 6D
     torch.testing.assert_close(encoder(world, hand_state), expected, atol=1e-5, rtol=1e-5)
+    # The file also holds the contact head: the whole contact model comes back from it alone.
+    model, normalization = load_contact_model(tmp_path / "encoder.pt")
+    assert normalization.record() == first.normalization.record() and not model.training
+    with torch.no_grad():
+        (logits, indices), (want, want_indices) = model(pts, hand), first.model(pts, hand)
+    torch.testing.assert_close(logits, want, atol=1e-5, rtol=1e-5)
+    assert logits.shape == (2, 16) and torch.equal(indices[1], want_indices[1])
     # Resume: a longer budget continues from step 60 with the saved optimizer state.
     cfg.steps = 70
     resumed = Pretrainer(cfg, data, tmp_path)
@@ -96,6 +103,34 @@ def test_short_run_learns_resumes_and_exports(data, tmp_path):
     assert resumed.optimizer.state_dict()["state"].keys() == first.optimizer.state_dict()["state"].keys()
     resumed.train(progress=False)
     assert json.loads((tmp_path / "metrics.json").read_text())["steps"] == 70
+
+
+def test_an_encoder_file_without_a_contact_head_is_named(tmp_path):
+    """Encoders exported before heads were kept, and pretext encoders, have no contact model."""
+    torch.manual_seed(0)
+    for kind, hint in (("corn", "re-export"), ("rot", "not contact-pretrained")):
+        path = tmp_path / f"{kind}.pt"
+        save_encoder(path, NormalizedEncoder(kind, make_network(kind), InputNormalization()))
+        with pytest.raises(InputError, match=hint) as err:
+            load_contact_model(path)
+        assert str(path) in str(err.value)
+    # A head of another shape (say a PointNet head saved with a corn encoder) is named too.
+    path = tmp_path / "mixed.pt"
+    save_encoder(path, NormalizedEncoder("corn", make_network("corn"), InputNormalization()),
+                 contact_head=torch.nn.Linear(3, 1))
+    with pytest.raises(InputError, match="contact head does not fit"):
+        load_contact_model(path)
+    # PointNet: point logits from the head kept beside the encoder.
+    from corn_drake.nn.pointnet import PointNetContactModel
+
+    trained = PointNetContactModel().eval()
+    path = tmp_path / "pointnet.pt"
+    save_encoder(path, NormalizedEncoder("pointnet", trained.encoder, InputNormalization()),
+                 contact_head=trained.head)
+    model, _ = load_contact_model(path)
+    cloud, hand = _pose_batch(2)
+    with torch.no_grad():
+        torch.testing.assert_close(model(cloud, hand), trained(cloud, hand))
 
 
 def _pose_batch(n):

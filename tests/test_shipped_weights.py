@@ -48,11 +48,21 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
     assert card["bytes"] == {p.relative_to(folder).as_posix(): p.stat().st_size
                              for p in sorted(folder.rglob("*"))
                              if p.is_file() and p.name != "card.json"}
+    library = library_arguments(card["library_command"])
+    assert int(library.get("--seed", 0)) == card["library_seed"]
+    if card["policy"] == "student":  # a distill run: its student diagram's teacher part
+        from corn_drake.rl.checkpoints import load_student_run
+
+        cfg, _ = load_student_run(folder)
+        assert cfg.env.teacher.task.name == card["task"]
+        assert cfg.env.teacher.scene.object.library == library["--out"]
+        assert report["perception"] == card["perception"] == "geometric"  # the full chain
+        assert cfg.env.cameras.mode == card["cameras"]
+        assert (REPO / cfg.teacher / "card.json").is_file()  # distilled from a shipped teacher
+        return
     cfg = load_run_config(folder)
     assert cfg.policy == card["policy"] and cfg.env.task.name == card["task"]
-    library = library_arguments(card["library_command"])
     assert cfg.env.scene.object.library == library["--out"]
-    assert int(library.get("--seed", 0)) == card["library_seed"]
     if cfg.encoder:  # named relative to the folder, so the folder works wherever it lies
         assert (folder / cfg.encoder).is_file()
 

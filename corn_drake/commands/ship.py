@@ -104,7 +104,8 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
     ship = _ship_student if kind == "distill" else _ship_teacher
-    card = {**ship(run_dir, out, library["--out"]),
+    shipped = ship(run_dir, out, library["--out"])
+    card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
             "success_rate": report["success_rate"],
             "balanced_success_rate": report.get("balanced_success_rate"),
             "episodes": len(report["episodes"]), "split": "unseen",
@@ -114,7 +115,7 @@ def run(args) -> int:
                                  f"{library['--out']} --split unseen --episodes "
                                  f"{len(report['episodes'])} --report eval.json"),
             "train_command": args.train_command, "source_run": str(args.run),
-            "actions": report.get("actions", "mean")}
+            "actions": report.get("actions", "mean"), **shipped}
     if kind == "distill":
         card["perception"] = report["perception"]
     card["bytes"] = {p.relative_to(out).as_posix(): p.stat().st_size
@@ -137,12 +138,19 @@ def _weights(run_dir: Path, key: str) -> dict:
 
 
 def _save_weights(out: Path, state: dict) -> None:
+    """checkpoints/last.pt, byte for byte the same for the same weights: saved through a
+    buffer, since torch.save names its archive after the (temporary) file it writes, and a
+    re-shipped folder should not add a new copy of unchanged weights to the repository."""
+    import io
+
     import torch
 
     from corn_drake.io_utils import atomic_path
 
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
     with atomic_path(out / "checkpoints" / "last.pt") as tmp:
-        torch.save(state, tmp)
+        Path(tmp).write_bytes(buffer.getvalue())
 
 
 def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:

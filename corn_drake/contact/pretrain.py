@@ -79,6 +79,10 @@ class Pretrainer(PretrainLoop):
     def build_model(self) -> nn.Module:
         return CORNContactModel() if self.cfg.model == "corn" else PointNetContactModel()
 
+    @property
+    def contact_head(self) -> nn.Module:
+        return self.model.head
+
     def setup(self) -> None:
         self.train_set = {k: torch.from_numpy(v) for k, v in load_split(self.data, "train").items()
                           if k in ("points", "labels", "hand_pose")}

@@ -5,7 +5,9 @@ bare network: NormalizedEncoder holds the network and its InputNormalization, ta
 clouds and hand states, and is what make_policy_encoder and load_frozen_encoder return.
 
 encoder.pt: {"kind", "state_dict" (the network's), "normalization" (InputNormalization.record()),
-"pretraining" (how it was made)}.
+"pretraining" (how it was made), and for the contact-pretrained kinds "contact_head" (the
+prediction head's state_dict: policies never read it; load_contact_model does, so the encoder's
+contact predictions can be shown from the file alone)}.
 
 The kind names the network and how it was pretrained: "corn" (patch transformer, contact),
 "pointnet" (PointNet, contact), "p2v-lite" and "rot" (the same patch transformer as "corn",
@@ -66,13 +68,40 @@ def make_policy_encoder(kind: str) -> NormalizedEncoder:
     return NormalizedEncoder(kind, make_network(kind), InputNormalization())
 
 
-def save_encoder(path: str | Path, encoder: NormalizedEncoder, pretraining: dict | None = None) -> None:
+def save_encoder(path: str | Path, encoder: NormalizedEncoder, pretraining: dict | None = None,
+                 contact_head: nn.Module | None = None) -> None:
     """Writes `encoder` (network, normalisation) atomically; `pretraining` records how it was
-    made (steps, budget, held-out/unseen patch metrics)."""
+    made (steps, budget, held-out/unseen patch metrics); `contact_head`: the contact model's
+    head, kept beside the encoder (contact-pretrained kinds)."""
+    state = {"kind": encoder.kind, "state_dict": encoder.network.state_dict(),
+             "normalization": encoder.normalization.record(), "pretraining": pretraining}
+    if contact_head is not None:
+        state["contact_head"] = contact_head.state_dict()
     with atomic_path(path) as tmp:
-        torch.save({"kind": encoder.kind, "state_dict": encoder.network.state_dict(),
-                    "normalization": encoder.normalization.record(),
-                    "pretraining": pretraining}, tmp)
+        torch.save(state, tmp)
+
+
+def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]:
+    """The contact model (encoder + head, eval mode) saved in the encoder file `path`, with the
+    input normalisation it was pretrained with: CORNContactModel for "corn" (patch logits),
+    PointNetContactModel for "pointnet" (point logits). An encoder file without a head (a
+    pretext kind, or one exported before heads were kept) is an InputError naming it."""
+    from corn_drake.nn.encoder import CORNContactModel
+    from corn_drake.nn.pointnet import PointNetContactModel
+
+    encoder = load_frozen_encoder(path)
+    state = torch.load(path, weights_only=False)
+    if "contact_head" not in state:
+        raise InputError(f"encoder file {path} holds no contact head ({encoder.kind} encoder"
+                         + ("; re-export it with `corn-drake pretrain` on its run folder)"
+                            if encoder.kind in ("corn", "pointnet") else ", not contact-pretrained)"))
+    model = (CORNContactModel if encoder.kind == "corn" else PointNetContactModel)(encoder.network)
+    try:
+        model.head.load_state_dict(state["contact_head"])
+    except RuntimeError as e:
+        raise InputError(f"encoder file {path}: its contact head does not fit this version "
+                         f"({str(e).strip().splitlines()[-1].strip()})") from None
+    return model.eval(), encoder.normalization
 
 
 def load_frozen_encoder(path: str | Path) -> NormalizedEncoder:
