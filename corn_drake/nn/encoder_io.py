@@ -89,8 +89,7 @@ def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]
     from corn_drake.nn.encoder import CORNContactModel
     from corn_drake.nn.pointnet import PointNetContactModel
 
-    encoder = load_frozen_encoder(path)
-    state = torch.load(path, weights_only=False)
+    encoder, state = _read_encoder_file(path)
     if "contact_head" not in state:
         raise InputError(f"encoder file {path} holds no contact head ({encoder.kind} encoder"
                          + ("; re-export it with `corn-drake pretrain` on its run folder)"
@@ -107,6 +106,11 @@ def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]
 def load_frozen_encoder(path: str | Path) -> NormalizedEncoder:
     """The encoder saved at `path` with the normalisation it was pretrained with, in eval mode
     with gradients off."""
+    return _read_encoder_file(path)[0]
+
+
+def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
+    """(the frozen encoder, the file's whole saved dict) of the encoder file `path`."""
     path = Path(path)
     if not path.is_file():
         raise MissingInputError(f"encoder checkpoint not found: {path}")
@@ -128,4 +132,4 @@ def load_frozen_encoder(path: str | Path) -> NormalizedEncoder:
     encoder.eval()
     for p in encoder.parameters():
         p.requires_grad_(False)
-    return encoder
+    return encoder, state
