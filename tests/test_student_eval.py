@@ -214,6 +214,12 @@ def test_ship_a_student_run_evaluates_as_the_run(tmp_path, capsys):
     assert main(["ship", "--run", str(run), "--report", str(bare), "--library-command",
                  f"corn-drake objects --out {library}", "--out", str(tmp_path / "w2")]) == 2
     assert "perception" in capsys.readouterr().err
+    assert not (tmp_path / "w2").exists()
+    # A run whose weights are gone is refused before OUT is made.
+    (run / "checkpoints" / "last.pt").unlink()
+    assert main(["ship", "--run", str(run), "--report", str(report), "--library-command",
+                 f"corn-drake objects --out {library}", "--out", str(tmp_path / "w3")]) != 0
+    assert "checkpoint" in capsys.readouterr().err and not (tmp_path / "w3").exists()
 
 
 def _one_error_line(capsys, *needles: str) -> None:

@@ -101,8 +101,6 @@ def run(args) -> int:
     if kind == "distill" and "perception" not in report:
         raise InputError(f"--report {args.report} records no perception chain; a student's card "
                          "quotes an evaluation through it")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "checkpoints").mkdir(exist_ok=True)
     ship = _ship_student if kind == "distill" else _ship_teacher
     shipped = ship(run_dir, out, library["--out"])
     card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
@@ -137,6 +135,12 @@ def _weights(run_dir: Path, key: str) -> dict:
     return state
 
 
+def _make_folder(out: Path) -> None:
+    """OUT and OUT/checkpoints, made only once the run has loaded: a run that cannot be shipped
+    leaves nothing behind."""
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+
+
 def _save_weights(out: Path, state: dict) -> None:
     """checkpoints/last.pt, byte for byte the same for the same weights: saved through a
     buffer, since torch.save names its archive after the (temporary) file it writes, and a
@@ -163,6 +167,7 @@ def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
 
     cfg, agent = load_run(run_dir)  # the run must load as evaluate would load it
     state = _weights(run_dir, "agent")
+    _make_folder(out)
     encoder_card = None
     if cfg.encoder:
         with atomic_path(out / "encoder.pt") as tmp:
@@ -187,6 +192,7 @@ def _ship_student(run_dir: Path, out: Path, library: str) -> dict:
 
     cfg, _ = load_student_run(run_dir)  # the run must load as evaluate would load it
     state = _weights(run_dir, "student")
+    _make_folder(out)
     obj = cfg.env.teacher.scene.object
     if obj.kind == "library":
         obj.library = library
