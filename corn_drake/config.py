@@ -291,6 +291,10 @@ class TrainConfig:
     rollout_steps: int = 32  # per env and update
     seed: int = 0
     checkpoint_every: int = 5  # updates
+    # Keep a copy of the checkpoint as checkpoints/step_NNNNNNNNN.pt each time training passes
+    # a multiple of this many env steps (0: none). last.pt is overwritten; the copies let a
+    # comparison evaluate every run at the same wall-clock (`evaluate --checkpoint`).
+    snapshot_every: int = 0
     ray_address: str = ""
     encoder: str = ""  # frozen encoder checkpoint for corn / pn
     # Train on an encoder whose recorded contact F1 is below rl/encoders.MIN_CONTACT_F1 (the

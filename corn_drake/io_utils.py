@@ -159,18 +159,21 @@ def _read_checkpoint(path: Path, required: tuple[str, ...]) -> dict:
     return state
 
 
-def load_checkpoint(path: str | os.PathLike, required: tuple[str, ...] = ()) -> dict | None:
+def load_checkpoint(path: str | os.PathLike, required: tuple[str, ...] = (),
+                    fallback: bool = True) -> dict | None:
     """The state saved by save_checkpoint at `path`, or None when there is none to resume.
 
-    An unreadable latest checkpoint falls back to prev.pt with a warning on stderr; when no
-    checkpoint there can be read, an InputError names the files and why.
+    An unreadable latest checkpoint falls back to prev.pt with a warning on stderr (not with
+    fallback=False: a named snapshot is that step or nothing); when no checkpoint there can be
+    read, an InputError names the files and why.
     """
     import sys
 
     from corn_drake.errors import InputError
 
     path = Path(path)
-    candidates = [p for p in (path, previous_checkpoint(path)) if p.is_file()]
+    others = (previous_checkpoint(path),) if fallback else ()
+    candidates = [p for p in (path, *others) if p.is_file()]
     if not candidates:
         return None
     problems = []

@@ -49,17 +49,23 @@ def test_bench_sim_compares_against_another_physics_overlay(tmp_path):
 def test_train_then_evaluate_writes_the_report_keys(tmp_path):
     run = tmp_path / "run"
     assert main(["train", "--policy", "state", "--steps", "64", "--envs-per-worker", "2",
-                 "--rollout-steps", "16", "--set", "task.episode_steps=10", "--out", str(run),
-                 "--no-progress"]) == 0
+                 "--rollout-steps", "16", "--set", "task.episode_steps=10", "--set",
+                 "snapshot_every=32", "--out", str(run), "--no-progress"]) == 0
     report = tmp_path / "eval_state.json"
     assert main(["evaluate", "--run", str(run), "--episodes", "2", "--record", "1",
                  "--report", str(report)]) == 0
     data = json.loads(report.read_text())
-    for key in ("success_rate", "balanced_success_rate", "per_object", "episodes"):
+    for key in ("success_rate", "balanced_success_rate", "per_object", "episodes", "env_steps"):
         assert key in data
     assert len(data["episodes"]) == 2 and 0.0 <= data["success_rate"] <= 1.0
+    assert data["env_steps"] == 64 and data["checkpoint"] == "last.pt"
     html = data["episodes"][0]["recording"]
     assert html and Path(html).stat().st_size > 10_000
+    # A kept snapshot evaluates as the run at its step.
+    assert main(["evaluate", "--run", str(run), "--checkpoint", "step_000000032.pt",
+                 "--episodes", "1", "--record", "0", "--report", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert data["env_steps"] == 32 and data["checkpoint"] == "step_000000032.pt"
 
 
 def test_reference_controllers_evaluate_on_the_push_benchmark(tmp_path):

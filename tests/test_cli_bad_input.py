@@ -91,6 +91,7 @@ ROWS = [
          "env.task.episode_steps"),
     _row(f"train --set ppo.epochs=1.5 {OUT}", "--set ppo.epochs=1.5", "epochs"),
     _row(f"train --set seed {OUT}", "--set seed", "KEY=VALUE"),
+    _row(f"train --set snapshot_every=-1 {OUT}", "--set snapshot_every", ">= 0"),
     _row(f"train --set seed=[1 {OUT}", "--set seed=[1", "YAML"),
     _row(f"train --task nosuch_task {OUT}", "--task nosuch_task", "no such task"),
     _row(f"train --task {{root}}/bad_type.yaml {OUT}", "{root}/bad_type.yaml", "task.episode_steps"),
@@ -98,6 +99,8 @@ ROWS = [
     _row(f"train --objects {{root}}/nowhere {OUT}", "{root}/nowhere"),
     # evaluate (items 8, 14)
     _row(f"evaluate --run scripted --episodes 0 {REPORT}", "--episodes"),
+    _row(f"evaluate --run scripted --checkpoint step_000000064.pt {REPORT}", "--checkpoint",
+         "not a `corn-drake train` run"),
     _row(f"evaluate --run scripted --record -1 {REPORT}", "--record"),
     _row(f"evaluate --run scripted --seed -1 {REPORT}", "--seed"),
     _row(f"evaluate --run scripted --stochastic {REPORT}", "--stochastic"),

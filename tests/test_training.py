@@ -58,6 +58,29 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
         curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png)))
 
 
+def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_path):
+    from corn_drake.errors import MissingInputError
+    from corn_drake.rl.checkpoints import load_run_with_step, run_snapshots
+    from corn_drake.run_config import write_run_config
+
+    cfg = _small_cfg(160)  # 5 updates of 32 steps
+    cfg.snapshot_every = 64  # passed at 64 and 128 (96 and 160 pass no new multiple)
+    write_run_config(cfg, tmp_path)
+    trainer = Trainer(cfg, tmp_path)
+    trainer.train(progress=False)
+    assert run_snapshots(tmp_path) == ["step_000000064.pt", "step_000000128.pt"]
+    _, agent, step = load_run_with_step(tmp_path, "step_000000064.pt")
+    assert step == 64
+    _, last, last_step = load_run_with_step(tmp_path)
+    assert last_step == 160
+    # The snapshot holds the weights of its own step, not the last ones.
+    assert any(not torch.equal(a, b) for a, b in zip(agent.state_dict().values(),
+                                                     last.state_dict().values()))
+    for bad in ("step_000000096.pt", "../checkpoints/last.pt"):
+        with pytest.raises(MissingInputError, match="step_000000064.pt, step_000000128.pt"):
+            load_run_with_step(tmp_path, bad)
+
+
 @pytest.mark.slow
 def test_killed_training_process_resumes_from_its_checkpoint(tmp_path):
     cmd = [sys.executable, "-m", "corn_drake.cli", "train", "--policy", "state", "--steps", "100000",

@@ -67,6 +67,10 @@ def add_arguments(parser):
                         help="paint the policy's cross-attention over the object's patches "
                              "(viridis, every policy step) in the recordings and in the live "
                              "Meshcat (its URL is printed); corn, e2e, p2v-lite and rot policies only")
+    parser.add_argument("--checkpoint", default="",
+                        help="teacher runs only: a kept checkpoint's file name in RUN/checkpoints "
+                             "(e.g. step_000204800.pt, written with `train --set "
+                             "snapshot_every=N`) instead of last.pt")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -129,7 +133,7 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.evaluation import evaluate, success_by_group
     from corn_drake.io_utils import ensure_writable, write_json
-    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.rl.checkpoints import load_run_with_step
     from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
                                        replace_task)
 
@@ -142,12 +146,15 @@ def run(args) -> int:
     if args.record > 0:
         ensure_writable(out_dir, "--record")
     kind = "reference" if args.run in REFERENCES else run_kind(args.run)
+    if args.checkpoint and kind != "train":
+        raise InputError(f"--checkpoint {args.checkpoint} picks one of a teacher run's kept "
+                         f"checkpoints; --run {args.run} is not a `corn-drake train` run")
     if args.perception is not None and kind != "distill":
         what = ("a reference controller" if kind == "reference"
                 else "a teacher run (`corn-drake train`)")
         raise InputError(f"--perception {args.perception} applies to a student run (written by "
                          f"`corn-drake distill`); --run {args.run} is {what}")
-    student_cfg = None
+    student_cfg, extra = None, {}
     if args.run in REFERENCES:
         if args.attention:
             raise InputError(f"--attention shows a learned policy's cross-attention; --run "
@@ -174,8 +181,9 @@ def run(args) -> int:
             # run's env does.
             base, policy = TrainConfig(env=student_cfg.teacher), "student"
         else:
-            base, agent = load_run(args.run)
+            base, agent, env_steps = load_run_with_step(args.run, args.checkpoint)
             policy = base.policy
+            extra = {"env_steps": env_steps, "checkpoint": args.checkpoint or "last.pt"}
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         if args.attention and not getattr(agent, "has_attention", False):
@@ -187,7 +195,6 @@ def run(args) -> int:
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
     objects = _object_specs(args, cfg)
-    extra = {}
     if student_cfg is not None:
         trained_with = student_cfg.segmentation.mode
         # Evaluated through the full chain unless --perception says otherwise.
@@ -197,7 +204,7 @@ def run(args) -> int:
                                              mode=args.perception or "geometric"))
         student_cfg.check()
         cfg = student_cfg
-        extra = {"trained_perception": trained_with,
+        extra |= {"trained_perception": trained_with,
                  "observation_noise": dataclasses.asdict(student_cfg.observation)}
         print(f"student perception: {student_cfg.segmentation.mode} segmentation + ICP tracking "
               f"(trained with {trained_with})")

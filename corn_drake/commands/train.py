@@ -5,7 +5,7 @@ A new run's config is built in layers (corn_drake/run_config.py): the base diagr
 written into OUT/config.yaml. Training into an existing run resumes it from that file: `--out`
 is all it needs (`--resume` makes that a requirement, so a mistyped folder is not a new run).
 An argument given on a resume is an override of the recorded config, checked before anything
-is written: --steps may grow, --ray-address, --device (and checkpoint_every) may change; any
+is written: --steps may grow, --ray-address, --device (and checkpoint_every, snapshot_every) may change; any
 other difference is refused, naming the argument and both values. What an accepted override
 changes is printed.
 
@@ -31,9 +31,9 @@ SHORTCUTS = {"policy": "policy", "steps": "total_steps", "workers": "workers",
              "ray_address": "ray_address", "device": "device"}
 # A resumed run may change only these config fields: total_steps may grow (extends the run);
 # ray_address only says where the workers run, device where the learner's tensors live
-# (checkpoints hold CPU tensors); checkpoint_every is not an output.
+# (checkpoints hold CPU tensors); checkpoint_every and snapshot_every are not outputs.
 RESUME_MAY_GROW = ("total_steps",)
-RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every")
+RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every", "snapshot_every")
 
 
 def add_arguments(parser):
@@ -126,6 +126,10 @@ def run(args) -> int:
 
             library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
         cfg.env.check()  # a value no episode can be built from is refused before any write
+        if cfg.snapshot_every < 0:
+            raise InputError(f"{argument_of_field('snapshot_every')}: snapshot_every must be >= 0 "
+                             f"(env steps between kept checkpoints; 0 keeps none), got "
+                             f"{cfg.snapshot_every}")
         training_device(cfg.device, argument_of_field("device"))  # e.g. cuda on a CPU machine
         if recorded is not None:
             refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,

@@ -21,12 +21,38 @@ def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
     return encoder
 
 
-def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
+def snapshot_path(run_dir: str | Path, step: int) -> Path:
+    """Where a training run keeps its checkpoint of env step `step` (TrainConfig.snapshot_every)."""
+    return Path(run_dir) / "checkpoints" / f"step_{step:09d}.pt"
+
+
+def run_snapshots(run_dir: str | Path) -> list[str]:
+    """The kept checkpoints' file names of a run, oldest first."""
+    return sorted(p.name for p in (Path(run_dir) / "checkpoints").glob("step_*.pt"))
+
+
+def load_run(run_dir: str | Path, checkpoint: str = "") -> tuple[TrainConfig, TeacherAgent]:
+    """A run's config and agent, from checkpoints/last.pt or, given `checkpoint`, from that file
+    name in its checkpoints folder (a kept snapshot, e.g. step_000204800.pt)."""
+    cfg, agent, _ = load_run_with_step(run_dir, checkpoint)
+    return cfg, agent
+
+
+def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[TrainConfig, TeacherAgent, int]:
+    """load_run's (config, agent) and the env steps the loaded checkpoint was trained for."""
     run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
     cfg.encoder = run_encoder_path(run_dir, cfg.encoder)  # what distill's student starts from too
-    ckpt = run_dir / "checkpoints" / "last.pt"
-    state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
+    if checkpoint:
+        ckpt = run_dir / "checkpoints" / checkpoint
+        if Path(checkpoint).name != checkpoint or not ckpt.is_file():
+            kept = ", ".join(run_snapshots(run_dir)) or "none"
+            raise MissingInputError(f"--checkpoint {checkpoint!r}: no such file in "
+                                    f"{run_dir / 'checkpoints'} (kept snapshots: {kept})")
+        state = load_checkpoint(ckpt, required=("agent",), fallback=False)
+    else:
+        ckpt = run_dir / "checkpoints" / "last.pt"
+        state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
     if state is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
@@ -37,7 +63,7 @@ def load_run(run_dir: str | Path) -> tuple[TrainConfig, TeacherAgent]:
                          normalize_features=normalize)
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
-    return cfg, agent
+    return cfg, agent, int(state.get("global_step", 0))
 
 
 def load_student_run(run_dir: str | Path):

@@ -24,6 +24,7 @@ from corn_drake.config import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.checkpoints import snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
@@ -80,12 +81,19 @@ class Trainer:
                               cfg.ray_address, start)
 
     # --- checkpoints -------------------------------------------------------------------------
-    def _save(self) -> None:
+    def _save(self, path: Path | None = None) -> None:
         # CPU tensors (loaded with map_location="cpu"): a run resumes on any device.
         state = {"agent": to_cpu(self.agent.state_dict()), "ppo": to_cpu(self.ppo.state_dict()),
                  "reward_scaler": self.reward_scaler.state_dict(),
                  **progress_state(self), "policy": self.cfg.policy}
-        save_checkpoint(self.checkpoint_path, state)
+        save_checkpoint(path or self.checkpoint_path, state)
+
+    def _snapshot_if_due(self, steps: int) -> None:
+        """Keep checkpoints/step_NNNNNNNNN.pt when this update passed a multiple of
+        snapshot_every env steps (the update's last step is the snapshot's step)."""
+        every = self.cfg.snapshot_every
+        if every and self.global_step // every > (self.global_step - steps) // every:
+            self._save(snapshot_path(self.out, self.global_step))
 
     def _load(self) -> None:
         state = load_checkpoint(self.checkpoint_path, required=CHECKPOINT_KEYS)
@@ -188,6 +196,7 @@ class Trainer:
                       f"{row['steps_per_s']:.0f} steps/s", flush=True)
             if self.update_index % cfg.checkpoint_every == 0:
                 self._save()
+            self._snapshot_if_due(steps)
         self._save()
         writer.close()
         bar.close()
