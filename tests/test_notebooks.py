@@ -70,7 +70,7 @@ def test_library_plots_leave_the_notebook_backend_alone(tmp_path):
     not switch that kernel's matplotlib backend, or later figures stop showing inline."""
     import matplotlib
 
-    from corn_drake.rl.trainer import plot_learning_curves
+    from corn_drake.viz.learning_curves import plot_learning_curves
 
     inline = "module://matplotlib_inline.backend_inline"
     previous = matplotlib.get_backend()

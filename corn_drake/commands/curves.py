@@ -20,6 +20,12 @@ def add_arguments(parser):
     parser.add_argument("--run", action="append", required=True, dest="runs",
                         help="run folder written by `corn-drake train` (repeat for each run)")
     parser.add_argument("--out", required=True, help="PNG path")
+    parser.add_argument("--x", choices=("steps", "hours"), default="steps",
+                        help="x axis: env steps, or training hours (each update's steps over "
+                             "the steps/s it recorded, summed: the time on the machine it ran on)")
+    parser.add_argument("--summary", default="",
+                        help="JSON path: each run's final step and hours, and every run at the "
+                             "shortest run's training time (its step, training success there)")
 
 
 def run_history(run_dir: Path) -> tuple[str, list[dict]]:
@@ -48,12 +54,33 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
 
 
 def run(args) -> int:
-    from corn_drake.rl.trainer import plot_learning_curves
+    from corn_drake.io_utils import ensure_writable, write_json
+    from corn_drake.viz.learning_curves import at_equal_time, plot_learning_curves, training_hours
 
-    runs = dict(run_history(Path(r)) for r in args.runs)
+    if args.summary:
+        ensure_writable(Path(args.summary).parent, "--summary")
+    runs = {}
+    for r in args.runs:
+        label, history = run_history(Path(r))
+        if label in runs:
+            label = f"{label} [{len(runs)}]"  # the same run twice stays two lines
+        runs[label] = history
+        if history and (args.x == "hours" or args.summary):
+            try:
+                training_hours(history)
+            except ValueError as e:
+                raise InputError(f"--run {r}: no training time can be read from its history ({e})") from None
     for label, history in runs.items():
         last = history[-1] if history else {}
         print(f"{label}: {last.get('step', 0)} steps, success {last.get('success_rate', 0.0):.2f}")
-    plot_learning_curves(runs, Path(args.out))
+    plot_learning_curves(runs, Path(args.out), x=args.x)
     print(f"wrote {args.out}")
+    if args.summary:
+        equal = at_equal_time(runs)
+        print(f"at the shortest run's {equal['hours']:.2f} training hours: " + "; ".join(
+            f"{label} step {row['step']} success {row['training_success_rate']:.2f}"
+            for label, row in equal["runs"].items()))
+        write_json(Path(args.summary), {"runs_at_equal_time": equal,
+                                        "runs": [str(r) for r in args.runs]})
+        print(f"wrote {args.summary}")
     return 0

@@ -43,8 +43,9 @@ from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
 from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch, recent_mean,
                                            progress_state, restore_progress, to_cpu)
+# WINDOW: finished episodes behind the logged success rate and tracking error.
+from corn_drake.viz.learning_curves import WINDOW
 
-WINDOW = 100  # finished episodes behind the logged success rate and tracking error
 CHECKPOINT_KEYS = ("kind", "student", "optimizer", "global_step", "update_index", "beta",
                    "history", "recent_episodes", "episodes_per_object", "torch_rng", "generator",
                    "np_rng")

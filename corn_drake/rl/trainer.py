@@ -22,17 +22,17 @@ import torch
 
 from corn_drake.config import TrainConfig
 from corn_drake.errors import InputError
-from corn_drake.io_utils import atomic_path, load_checkpoint, save_checkpoint, write_json
+from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.checkpoints import snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
+from corn_drake.viz.learning_curves import WINDOW, plot_learning_curves
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
 from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch,  # noqa: F401
                                            progress_state, restore_progress, to_cpu)
 
-WINDOW = 100  # finished episodes behind the logged success rate and return
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
 CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "update_index",
                    "history", "torch_rng", "generator", "np_rng")
@@ -207,39 +207,3 @@ class Trainer:
         write_json(self.out / "metrics.json", metrics)
         plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics
-
-
-def plot_learning_curves(runs: dict[str, list[dict]], path: Path) -> None:
-    """Success rate and return against env steps, one line per run (label -> history rows)."""
-    # A Figure of its own, not pyplot: writing the file leaves the process's backend alone,
-    # so a notebook that trains in its kernel keeps plotting inline.
-    from matplotlib.figure import Figure
-
-    runs = {label: history for label, history in runs.items() if history}
-    if not runs:
-        return
-    from matplotlib.ticker import EngFormatter
-
-    fig = Figure(figsize=(9, 3.2))
-    axes = fig.subplots(1, 2)
-    for label, history in runs.items():
-        # Rows before the first finished episode hold placeholder zeros, and those before the
-        # window holds WINDOW episodes average over the few that ended first — mostly early
-        # successes, since a success ends an episode. Plot from a full window (or, for runs
-        # that never fill it, from the first finished episode).
-        done = np.cumsum([h["episodes"] for h in history])
-        full = np.flatnonzero(done >= WINDOW)
-        first = int(full[0]) if len(full) else int(np.argmax(done > 0)) if done[-1] else len(history)
-        history = history[first:]
-        steps = [h["step"] for h in history]
-        axes[0].plot(steps, [h["success_rate"] for h in history], label=label)
-        axes[1].plot(steps, [h["return"] for h in history], label=label)
-    axes[0].set(xlabel="env steps", ylabel="success rate (last 100 episodes)", ylim=(0, 1))
-    axes[1].set(xlabel="env steps", ylabel="episode return")
-    for ax in axes:
-        ax.xaxis.set_major_formatter(EngFormatter())  # 100k, 1M: full step counts overlap
-    axes[0].legend()
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)

@@ -1,0 +1,98 @@
+"""Learning curves of training runs: success and return against env steps or training hours,
+and the comparison of runs at an equal training time.
+
+A run's history rows (rl/trainer.py) carry each update's env steps and the steps/s it ran at,
+so the wall-clock a run spent training is the sum of steps / rate over its updates: the time
+of the updates only (no start-up, nothing between a kill and the resume), as measured on the
+machine the run went on. The paper compares representations at equal steps and at equal time
+(its two panels); `corn-drake curves --x hours` draws the second.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# Finished episodes behind the logged success rate and return (the trainer's window).
+WINDOW = 100
+X_AXES = ("steps", "hours")
+
+
+def training_hours(history: list[dict]) -> np.ndarray:
+    """Cumulative training hours at each history row (rows in step order)."""
+    steps = np.array([h["step"] for h in history], dtype=float)
+    rates = np.array([h["steps_per_s"] for h in history], dtype=float)
+    if np.any(rates <= 0) or np.any(np.diff(steps) <= 0):
+        raise ValueError("history rows need increasing steps and positive steps_per_s")
+    per_update = np.diff(steps, prepend=0.0)
+    return np.cumsum(per_update / rates) / 3600.0
+
+
+def first_full_window(history: list[dict]) -> int:
+    """Index of the first row whose success rate averages a full window of episodes.
+
+    Rows before the first finished episode hold placeholder zeros, and those before the window
+    holds WINDOW episodes average over the few that ended first — mostly early successes, since
+    a success ends an episode. Curves start at a full window (or, for runs that never fill it,
+    at the first finished episode)."""
+    done = np.cumsum([h["episodes"] for h in history])
+    full = np.flatnonzero(done >= WINDOW)
+    if len(full):
+        return int(full[0])
+    return int(np.argmax(done > 0)) if len(done) and done[-1] else len(history)
+
+
+def at_equal_time(runs: dict[str, list[dict]]) -> dict:
+    """Each run at the training time of the run that trained for the least: the step it had
+    reached and its training success there (the last 100 training episodes, the curve's
+    value). The time is the shortest run's, so every run has a row at or before it."""
+    hours = {label: training_hours(h) for label, h in runs.items() if h}
+    if not hours:
+        return {"hours": 0.0, "runs": {}}
+    budget = min(float(t[-1]) for t in hours.values())
+    rows = {}
+    for label, t in hours.items():
+        i = int(np.searchsorted(t, budget, side="right")) - 1
+        row = runs[label][max(i, 0)]
+        rows[label] = {"step": int(row["step"]), "hours": float(t[max(i, 0)]),
+                       "training_success_rate": float(row["success_rate"]),
+                       "final_step": int(runs[label][-1]["step"]),
+                       "final_hours": float(t[-1])}
+    return {"hours": budget, "runs": rows}
+
+
+def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "steps") -> None:
+    """Success rate and return against env steps or training hours, one line per run
+    (label -> history rows)."""
+    if x not in X_AXES:
+        raise ValueError(f"x must be one of {X_AXES}, got {x!r}")
+    # A Figure of its own, not pyplot: writing the file leaves the process's backend alone,
+    # so a notebook that trains in its kernel keeps plotting inline.
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import EngFormatter
+
+    from corn_drake.io_utils import atomic_path
+
+    runs = {label: history for label, history in runs.items() if history}
+    if not runs:
+        return
+    fig = Figure(figsize=(9, 3.2))
+    axes = fig.subplots(1, 2)
+    for label, history in runs.items():
+        xs = training_hours(history) if x == "hours" else np.array([h["step"] for h in history])
+        first = first_full_window(history)
+        history, xs = history[first:], xs[first:]
+        axes[0].plot(xs, [h["success_rate"] for h in history], label=label)
+        axes[1].plot(xs, [h["return"] for h in history], label=label)
+    xlabel = "training hours (this machine)" if x == "hours" else "env steps"
+    axes[0].set(xlabel=xlabel, ylabel="success rate (last 100 episodes)", ylim=(0, 1))
+    axes[1].set(xlabel=xlabel, ylabel="episode return")
+    if x == "steps":
+        for ax in axes:
+            ax.xaxis.set_major_formatter(EngFormatter())  # 100k, 1M: full step counts overlap
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
