@@ -295,6 +295,11 @@ class TrainConfig:
     # a multiple of this many env steps (0: none). last.pt is overwritten; the copies let a
     # comparison evaluate every run at the same wall-clock (`evaluate --checkpoint`).
     snapshot_every: int = 0
+    # A finished run whose trained agent (weights, log-std, observation normalisers) this run
+    # starts from, with a fresh optimiser, reward scaler and step count: a curriculum, e.g. the
+    # push teacher carried on to push_turn. Same policy, encoder and network shape; the
+    # source's log-std replaces init_log_std. Its env steps are not counted in this run's.
+    init_from: str = ""
     ray_address: str = ""
     encoder: str = ""  # frozen encoder checkpoint for corn / pn
     # Train on an encoder whose recorded contact F1 is below rl/encoders.MIN_CONTACT_F1 (the

@@ -92,6 +92,7 @@ ROWS = [
     _row(f"train --set ppo.epochs=1.5 {OUT}", "--set ppo.epochs=1.5", "epochs"),
     _row(f"train --set seed {OUT}", "--set seed", "KEY=VALUE"),
     _row(f"train --set snapshot_every=-1 {OUT}", "--set snapshot_every", ">= 0"),
+    _row(f"train --init-from {{root}}/nowhere {OUT}", "--init-from {root}/nowhere"),
     _row(f"train --set seed=[1 {OUT}", "--set seed=[1", "YAML"),
     _row(f"train --task nosuch_task {OUT}", "--task nosuch_task", "no such task"),
     _row(f"train --task {{root}}/bad_type.yaml {OUT}", "{root}/bad_type.yaml", "task.episode_steps"),

@@ -286,3 +286,32 @@ def test_ray_workers_share_the_object_rounds_of_an_in_process_batch(tmp_path):
     np.testing.assert_allclose(remote_goal, goal)
     assert [o for o, _ in remote] == [o for o, _ in local]
     np.testing.assert_allclose([r for _, r in remote], [r for _, r in local], rtol=1e-9)
+
+
+def test_a_run_started_from_another_carries_its_agent_and_refuses_another_network(tmp_path, capsys):
+    from corn_drake.cli import main
+    from corn_drake.rl.checkpoints import load_run
+
+    source = tmp_path / "push"
+    assert main(["train", "--policy", "state", "--task", "push", "--steps", "32",
+                 "--envs-per-worker", "2", "--rollout-steps", "16", "--out", str(source),
+                 "--no-progress"]) == 0
+    _, trained = load_run(source)
+    # No --policy: the source's is taken; the new run starts from its trained agent.
+    turn = tmp_path / "turn"
+    assert main(["train", "--init-from", str(source), "--task", "push_turn", "--steps", "32",
+                 "--envs-per-worker", "2", "--rollout-steps", "16", "--set",
+                 "ppo.lr=1e-12", "--set", "ppo.critic_lr=1e-12", "--out", str(turn),
+                 "--no-progress"]) == 0
+    cfg, carried = load_run(turn)
+    assert cfg.init_from == str(source) and cfg.env.task.name == "push_turn"
+    for (name, a), b in zip(trained.state_dict().items(), carried.state_dict().values()):
+        # The observation normalisers moved with the new run's batch; the weights barely did.
+        if "normalizer" not in name:
+            torch.testing.assert_close(a, b, atol=1e-6, rtol=0, msg=name)
+    for extra, named in ((["--set", "ppo.separate_critic=true"], "its ppo.separate_critic"),
+                         (["--policy", "e2e"], "its policy is 'state'")):
+        assert main(["train", "--init-from", str(source), *extra, "--out",
+                     str(tmp_path / "other"), "--no-progress"]) != 0
+        assert named in capsys.readouterr().err
+    assert not (tmp_path / "other" / "config.yaml").exists()

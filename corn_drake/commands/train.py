@@ -28,7 +28,7 @@ SHORTCUTS = {"policy": "policy", "steps": "total_steps", "workers": "workers",
              "envs_per_worker": "envs_per_worker", "rollout_steps": "rollout_steps",
              "minibatches": "ppo.minibatches", "init_log_std": "init_log_std",
              "encoder": "encoder", "allow_weak_encoder": "allow_weak_encoder", "seed": "seed",
-             "ray_address": "ray_address", "device": "device"}
+             "ray_address": "ray_address", "device": "device", "init_from": "init_from"}
 # A resumed run may change only these config fields: total_steps may grow (extends the run);
 # ray_address only says where the workers run, device where the learner's tensors live
 # (checkpoints hold CPU tensors); checkpoint_every and snapshot_every are not outputs.
@@ -55,6 +55,10 @@ def add_arguments(parser):
     parser.add_argument("--objects", default=None,
                         help="object library folder: train on all its train objects "
                              "(default: the task's object)")
+    parser.add_argument("--init-from", default=None, metavar="RUN",
+                        help="start from this finished run's trained agent (a curriculum, e.g. "
+                             "push -> push_turn): its policy and encoder unless given, a fresh "
+                             "optimiser and step count")
     parser.add_argument("--encoder", default=None,
                         help="pretrained encoder checkpoint (corn, pn, p2v-lite, rot), of the "
                              "kind the policy names")
@@ -126,6 +130,10 @@ def run(args) -> int:
 
             library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
         cfg.env.check()  # a value no episode can be built from is refused before any write
+        if cfg.init_from and recorded is None:
+            from corn_drake.rl.checkpoints import check_init_source
+
+            cfg = check_init_source(cfg, take_policy=args.policy is None)  # and its encoder
         if cfg.snapshot_every < 0:
             raise InputError(f"{argument_of_field('snapshot_every')}: snapshot_every must be >= 0 "
                              f"(env steps between kept checkpoints; 0 keeps none), got "

@@ -93,3 +93,44 @@ def load_student_run(run_dir: str | Path):
         raise InputError(f"{ckpt}: the saved student does not fit this version "
                          f"({str(e).strip().splitlines()[-1].strip()})") from None
     return cfg, student.eval()
+
+
+def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfig:
+    """`cfg` with the encoder (when it names none) and, with take_policy, the policy of its
+    init_from run filled in, after checking that the source's agent fits: same policy, critic
+    layout and feature normalisation, the same encoder file, a readable checkpoint.
+    InputError naming --init-from otherwise."""
+    import dataclasses
+
+    from corn_drake.errors import InputError
+
+    source = Path(cfg.init_from)
+    try:
+        src = load_run_config(source)
+    except (MissingInputError, InputError) as e:
+        raise InputError(f"--init-from {source}: not a training run ({e})") from None
+    if take_policy:
+        cfg = dataclasses.replace(cfg, policy=src.policy)
+    for field, ours, theirs in (("policy", cfg.policy, src.policy),
+                                ("ppo.separate_critic", cfg.ppo.separate_critic, src.ppo.separate_critic),
+                                ("normalize_features", cfg.normalize_features, src.normalize_features)):
+        if ours != theirs:
+            raise InputError(f"--init-from {source}: its {field} is {theirs!r}, this run's "
+                             f"{ours!r}; the agent's weights fit only the same network")
+    encoder = run_encoder_path(source, src.encoder)
+    if not cfg.encoder:
+        cfg = dataclasses.replace(cfg, encoder=encoder)
+    elif Path(cfg.encoder).resolve() != Path(encoder).resolve():
+        raise InputError(f"--init-from {source}: it was trained on encoder {encoder}, this run "
+                         f"names {cfg.encoder}; leave --encoder off to take the source's")
+    init_agent_state(source)  # readable before anything is written
+    return cfg
+
+
+def init_agent_state(source: str | Path) -> dict:
+    """The trained agent's state_dict of run `source` (its last checkpoint)."""
+    ckpt = Path(source) / "checkpoints" / "last.pt"
+    state = load_checkpoint(ckpt, required=("agent",))
+    if state is None:
+        raise MissingInputError(f"--init-from {source}: no checkpoint (expected {ckpt})")
+    return state["agent"]

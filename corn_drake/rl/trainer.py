@@ -24,7 +24,7 @@ from corn_drake.config import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
-from corn_drake.rl.checkpoints import snapshot_path
+from corn_drake.rl.checkpoints import init_agent_state, snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
@@ -71,6 +71,8 @@ class Trainer:
         self.episodes_per_object: dict[str, int] = {}
         self.checkpoint_path = self.out / "checkpoints" / "last.pt"
         self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
+        if self.global_step == 0 and cfg.init_from:  # a new run of a curriculum
+            self.agent.load_saved_state(init_agent_state(cfg.init_from), cfg.init_from)
         self.envs = self._make_envs(n_envs)
 
     def _make_envs(self, n_envs: int):
