@@ -118,6 +118,10 @@ ROWS = [
     # the tiny library holds clouds only: evaluate needs each object's full scene description
     _row(f"evaluate --run scripted --objects {{root}}/lib --split all {REPORT}",
          "{root}/lib/manifest.json", "unit_inertia"),
+    # compare
+    _row("compare", "--report"),
+    _row("compare --report {root}/nowhere.json", "{root}/nowhere.json"),
+    _row("compare --report {root}/bad_type.yaml", "{root}/bad_type.yaml"),
     # curves
     _row("curves --run {root}/nowhere --out {root}/out/c.png", "{root}/nowhere"),
     # ship / gallery (shipped weights, issue 17) and objects --split

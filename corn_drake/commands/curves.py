@@ -59,12 +59,12 @@ def run(args) -> int:
 
     if args.summary:
         ensure_writable(Path(args.summary).parent, "--summary")
-    runs = {}
+    runs, folders = {}, {}
     for r in args.runs:
         label, history = run_history(Path(r))
         if label in runs:
             label = f"{label} [{len(runs)}]"  # the same run twice stays two lines
-        runs[label] = history
+        runs[label], folders[label] = history, str(Path(r).resolve())
         if history and (args.x == "hours" or args.summary):
             try:
                 training_hours(history)
@@ -77,6 +77,8 @@ def run(args) -> int:
     print(f"wrote {args.out}")
     if args.summary:
         equal = at_equal_time(runs)
+        for label, row in equal["runs"].items():
+            row["run"] = folders[label]  # what `corn-drake compare` matches reports to
         print(f"at the shortest run's {equal['hours']:.2f} training hours: " + "; ".join(
             f"{label} step {row['step']} success {row['training_success_rate']:.2f}"
             for label, row in equal["runs"].items()))
