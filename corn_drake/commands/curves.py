@@ -21,8 +21,12 @@ def add_arguments(parser):
                         help="run folder written by `corn-drake train` (repeat for each run)")
     parser.add_argument("--out", required=True, help="PNG path")
     parser.add_argument("--x", choices=("steps", "hours"), default="steps",
-                        help="x axis: env steps, or training hours (each update's steps over "
-                             "the steps/s it recorded, summed: the time on the machine it ran on)")
+                        help="x axis: env steps, or training hours (each update's steps over its "
+                             "steps/s, summed: the time on the machine it ran on; see --rate)")
+    parser.add_argument("--rate", choices=("median", "recorded"), default="median",
+                        help="with --x hours and --summary: charge every update at the run's "
+                             "median steps/s (default: steady when the core was shared for a "
+                             "while) or at the steps/s it recorded")
     parser.add_argument("--summary", default="",
                         help="JSON path: each run's final step and hours, and every run at the "
                              "shortest run's training time (its step, training success there)")
@@ -67,16 +71,16 @@ def run(args) -> int:
         runs[label], folders[label] = history, str(Path(r).resolve())
         if history and (args.x == "hours" or args.summary):
             try:
-                training_hours(history)
+                training_hours(history, args.rate)
             except ValueError as e:
                 raise InputError(f"--run {r}: no training time can be read from its history ({e})") from None
     for label, history in runs.items():
         last = history[-1] if history else {}
         print(f"{label}: {last.get('step', 0)} steps, success {last.get('success_rate', 0.0):.2f}")
-    plot_learning_curves(runs, Path(args.out), x=args.x)
+    plot_learning_curves(runs, Path(args.out), x=args.x, rate=args.rate)
     print(f"wrote {args.out}")
     if args.summary:
-        equal = at_equal_time(runs)
+        equal = at_equal_time(runs, args.rate)
         for label, row in equal["runs"].items():
             row["run"] = folders[label]  # what `corn-drake compare` matches reports to
         print(f"at the shortest run's {equal['hours']:.2f} training hours: " + "; ".join(

@@ -4,8 +4,11 @@ and the comparison of runs at an equal training time.
 A run's history rows (rl/trainer.py) carry each update's env steps and the steps/s it ran at,
 so the wall-clock a run spent training is the sum of steps / rate over its updates: the time
 of the updates only (no start-up, nothing between a kill and the resume), as measured on the
-machine the run went on. The paper compares representations at equal steps and at equal time
-(its two panels); `corn-drake curves --x hours` draws the second.
+machine the run went on ("recorded"). On a machine whose one core is shared now and then (an
+evaluation beside the run halves its rate for a while), the run's median rate is the steadier
+measure of what the policy costs: "median" charges every update at it. The paper compares
+representations at equal steps and at equal time (its two panels); `corn-drake curves --x
+hours` draws the second.
 """
 
 from __future__ import annotations
@@ -17,14 +20,20 @@ import numpy as np
 # Finished episodes behind the logged success rate and return (the trainer's window).
 WINDOW = 100
 X_AXES = ("steps", "hours")
+RATES = ("median", "recorded")
 
 
-def training_hours(history: list[dict]) -> np.ndarray:
-    """Cumulative training hours at each history row (rows in step order)."""
+def training_hours(history: list[dict], rate: str = "median") -> np.ndarray:
+    """Cumulative training hours at each history row (rows in step order), each update charged
+    at its recorded steps/s or at the run's median steps/s."""
+    if rate not in RATES:
+        raise ValueError(f"rate must be one of {RATES}, got {rate!r}")
     steps = np.array([h["step"] for h in history], dtype=float)
     rates = np.array([h["steps_per_s"] for h in history], dtype=float)
-    if np.any(rates <= 0) or np.any(np.diff(steps) <= 0):
+    if np.any(~(rates > 0)) or np.any(np.diff(steps) <= 0):
         raise ValueError("history rows need increasing steps and positive steps_per_s")
+    if rate == "median":
+        rates = np.full_like(rates, np.median(rates))
     per_update = np.diff(steps, prepend=0.0)
     return np.cumsum(per_update / rates) / 3600.0
 
@@ -43,13 +52,13 @@ def first_full_window(history: list[dict]) -> int:
     return int(np.argmax(done > 0)) if len(done) and done[-1] else len(history)
 
 
-def at_equal_time(runs: dict[str, list[dict]]) -> dict:
+def at_equal_time(runs: dict[str, list[dict]], rate: str = "median") -> dict:
     """Each run at the training time of the run that trained for the least: the step it had
     reached and its training success there (the last 100 training episodes, the curve's
     value). The time is the shortest run's, so every run has a row at or before it."""
-    hours = {label: training_hours(h) for label, h in runs.items() if h}
+    hours = {label: training_hours(h, rate) for label, h in runs.items() if h}
     if not hours:
-        return {"hours": 0.0, "runs": {}}
+        return {"hours": 0.0, "rate": rate, "runs": {}}
     budget = min(float(t[-1]) for t in hours.values())
     rows = {}
     for label, t in hours.items():
@@ -59,10 +68,11 @@ def at_equal_time(runs: dict[str, list[dict]]) -> dict:
                        "training_success_rate": float(row["success_rate"]),
                        "final_step": int(runs[label][-1]["step"]),
                        "final_hours": float(t[-1])}
-    return {"hours": budget, "runs": rows}
+    return {"hours": budget, "rate": rate, "runs": rows}
 
 
-def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "steps") -> None:
+def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "steps",
+                         rate: str = "median") -> None:
     """Success rate and return against env steps or training hours, one line per run
     (label -> history rows)."""
     if x not in X_AXES:
@@ -80,12 +90,12 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "step
     fig = Figure(figsize=(9, 3.2))
     axes = fig.subplots(1, 2)
     for label, history in runs.items():
-        xs = training_hours(history) if x == "hours" else np.array([h["step"] for h in history])
+        xs = training_hours(history, rate) if x == "hours" else np.array([h["step"] for h in history])
         first = first_full_window(history)
         history, xs = history[first:], xs[first:]
         axes[0].plot(xs, [h["success_rate"] for h in history], label=label)
         axes[1].plot(xs, [h["return"] for h in history], label=label)
-    xlabel = "training hours (this machine)" if x == "hours" else "env steps"
+    xlabel = f"training hours ({rate} steps/s, this machine)" if x == "hours" else "env steps"
     axes[0].set(xlabel=xlabel, ylabel="success rate (last 100 episodes)", ylim=(0, 1))
     axes[1].set(xlabel=xlabel, ylabel="episode return")
     if x == "steps":
