@@ -55,5 +55,8 @@ def test_a_card_quotes_only_its_own_runs_unseen_report(tmp_path):
         _check_report({**report, "split": "train"}, runs, "r.json")
     with pytest.raises(InputError, match="overrides"):
         _check_report({**report, "overrides": [{"key": "env.task.name"}]}, runs, "r.json")
+    _check_report({**report, "checkpoint": "last.pt"}, runs, "r.json")
+    with pytest.raises(InputError, match="kept checkpoint step_000051200.pt"):
+        _check_report({**report, "checkpoint": "step_000051200.pt"}, runs, "r.json")
     with pytest.raises(InputError, match="success_rate"):
         _check_report({k: v for k, v in report.items() if k != "success_rate"}, runs, "r.json")

@@ -84,6 +84,9 @@ def _check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
     if report.get("overrides"):
         raise InputError(f"--report {path} was run with overrides ({report['overrides']}); a card "
                          "quotes the run on its own task")
+    if report.get("checkpoint", "last.pt") != "last.pt":
+        raise InputError(f"--report {path} evaluated the kept checkpoint {report['checkpoint']}; "
+                         "a card quotes the weights it ships, the run's last.pt")
 
 
 def run(args) -> int:
@@ -180,8 +183,11 @@ def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
         cfg.env.scene.object.library = library
     write_run_config(cfg, out)
     _save_weights(out, {"agent": state["agent"], "global_step": state["global_step"]})
-    return {"policy": cfg.policy, "task": cfg.env.task.name,
+    card = {"policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "encoder": encoder_card}
+    if cfg.init_from:  # a curriculum run: env_steps counts only its own, not its source's
+        card["init_from"] = cfg.init_from
+    return card
 
 
 def _ship_student(run_dir: Path, out: Path, library: str) -> dict:
