@@ -123,8 +123,9 @@ def _is_complete_torch_file(path: Path) -> bool:
         return False
 
 
-def save_checkpoint(path: str | os.PathLike, state: dict) -> None:
-    """torch.save(state) to `path` atomically; the checkpoint it replaces becomes prev.pt.
+def save_checkpoint(path: str | os.PathLike, state: dict, keep_previous: bool = True) -> None:
+    """torch.save(state) to `path` atomically; the checkpoint it replaces becomes prev.pt
+    (not with keep_previous=False: a kept snapshot beside last.pt must not take its prev.pt).
 
     `path` is a complete file at every instant: the old one is copied to prev.pt (itself an
     atomic write) before the new one is renamed over it. An old file that is not a complete
@@ -137,7 +138,7 @@ def save_checkpoint(path: str | os.PathLike, state: dict) -> None:
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(state, tmp)
-        if path.is_file() and _is_complete_torch_file(path):
+        if keep_previous and path.is_file() and _is_complete_torch_file(path):
             with atomic_path(previous_checkpoint(path)) as tmp_previous:
                 shutil.copyfile(path, tmp_previous)
 

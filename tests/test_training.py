@@ -62,7 +62,7 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 
 def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_path):
     from corn_drake.errors import MissingInputError
-    from corn_drake.rl.checkpoints import load_run_with_step, run_snapshots
+    from corn_drake.rl.checkpoints import load_run_with_step, run_snapshots, snapshot_path
     from corn_drake.run_config import write_run_config
 
     cfg = _small_cfg(160)  # 5 updates of 32 steps
@@ -81,6 +81,12 @@ def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_pat
     for bad in ("step_000000096.pt", "../checkpoints/last.pt"):
         with pytest.raises(MissingInputError, match="step_000000064.pt, step_000000128.pt"):
             load_run_with_step(tmp_path, bad)
+    # A resumed run that passes a kept step again rewrites its snapshot; prev.pt (the checkpoint
+    # before last.pt) stays, instead of taking the old snapshot's place.
+    prev = (tmp_path / "checkpoints" / "prev.pt").read_bytes()
+    trainer._save(snapshot_path(tmp_path, 64))
+    assert (tmp_path / "checkpoints" / "prev.pt").read_bytes() == prev
+    assert load_run_with_step(tmp_path, "step_000000064.pt")[2] == 160
 
 
 @pytest.mark.slow

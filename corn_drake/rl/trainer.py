@@ -83,12 +83,18 @@ class Trainer:
                               cfg.ray_address, start)
 
     # --- checkpoints -------------------------------------------------------------------------
-    def _save(self, path: Path | None = None) -> None:
+    def _save(self, snapshot: Path | None = None) -> None:
+        """The resumable checkpoint (last.pt, the one before it kept as prev.pt), or the same
+        state as a kept `snapshot` file (no rotation: a resumed run that passes the same step
+        again rewrites its snapshot and leaves prev.pt alone)."""
         # CPU tensors (loaded with map_location="cpu"): a run resumes on any device.
         state = {"agent": to_cpu(self.agent.state_dict()), "ppo": to_cpu(self.ppo.state_dict()),
                  "reward_scaler": self.reward_scaler.state_dict(),
                  **progress_state(self), "policy": self.cfg.policy}
-        save_checkpoint(path or self.checkpoint_path, state)
+        if snapshot is None:
+            save_checkpoint(self.checkpoint_path, state)
+        else:
+            save_checkpoint(snapshot, state, keep_previous=False)
 
     def _snapshot_if_due(self, steps: int) -> None:
         """Keep checkpoints/step_NNNNNNNNN.pt when this update passed a multiple of
