@@ -132,6 +132,15 @@ def set_fields(cfg: TrainConfig, values: Mapping[str, Any], label: str) -> Train
     return load_config_string(dump_tagged_yaml(data), TrainConfig, label, defaults=cfg)
 
 
+def on_library(cfg: TrainConfig, library: str, label: str = "--objects") -> TrainConfig:
+    """`cfg` training on every train object of `library`, a new one each episode (train
+    --objects); rl/vec_env.library_train_ids checks that the library can be cycled."""
+    return set_fields(cfg, {"env.scene.object.kind": "library",
+                            "env.scene.object.library": library,
+                            "env.scene.object.library_objects": "train",
+                            "env.scene.object.object_id": ""}, label)
+
+
 def apply_sets(cfg: TrainConfig, items: Iterable[str], only: str | None = None,
                option: str = "--set") -> TrainConfig:
     """`cfg` with each `KEY=VALUE` of `items` loaded on top in turn, VALUE parsed as YAML (text

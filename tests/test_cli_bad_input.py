@@ -118,6 +118,12 @@ ROWS = [
     # the tiny library holds clouds only: evaluate needs each object's full scene description
     _row(f"evaluate --run scripted --objects {{root}}/lib --split all {REPORT}",
          "{root}/lib/manifest.json", "unit_inertia"),
+    # bench policies
+    _row(f"bench policies --policies bogus {BENCH_REPORT}", "--policies"),
+    _row(f"bench policies --policies corn,corn {BENCH_REPORT}", "--policies"),
+    _row(f"bench policies --objects {{root}}/nowhere {BENCH_REPORT}", "{root}/nowhere"),
+    _row(f"curves --run {{root}}/nowhere --rates {{root}}/nowhere.json --out {{root}}/out/c.png",
+         "{root}/nowhere.json"),
     # compare
     _row("compare", "--report"),
     _row("compare --report {root}/nowhere.json", "{root}/nowhere.json"),

@@ -25,6 +25,10 @@ def test_training_hours_sum_each_updates_steps_over_its_rate():
         training_hours(_history([1.0, 0.0]))
     with pytest.raises(ValueError, match="rate must be"):
         training_hours(history, "mean")
+    # A benchmarked rate (steps/s) charges every update at it: 3 x 3600 steps at 3 steps/s.
+    np.testing.assert_allclose(training_hours(history, 3.0), [1 / 3, 2 / 3, 1.0])
+    with pytest.raises(ValueError, match="must be > 0"):
+        training_hours(history, 0.0)
 
 
 def test_runs_at_equal_time_are_read_at_the_shortest_runs_hours():
@@ -50,13 +54,58 @@ def test_curves_against_hours_write_the_figure_and_summary(tmp_path):
         write_json(tmp_path / name / "metrics.json", {"history": _history(rates)})
     png, summary = tmp_path / "t.png", tmp_path / "out" / "s.json"
     assert curves.run(Namespace(runs=[str(tmp_path / "a"), str(tmp_path / "b")], out=str(png),
-                                x="hours", rate="median", summary=str(summary))) == 0
+                                x="hours", rate="median", rates="", summary=str(summary))) == 0
     assert png.stat().st_size > 1000
     rows = json.loads(summary.read_text())["runs_at_equal_time"]["runs"]
     assert {r["step"] for r in rows.values()} == {4 * 3600, 2 * 3600}
     write_json(tmp_path / "a" / "metrics.json", {"history": _history([2.0, -1.0])})
     with pytest.raises(InputError, match="no training time"):
-        curves.run(Namespace(runs=[str(tmp_path / "a")], out=str(png), x="hours", rate="median",
+        curves.run(Namespace(runs=[str(tmp_path / "a")], out=str(png), x="hours", rate="median", rates="",
                              summary=""))
     with pytest.raises(ValueError, match="x must be"):
         plot_learning_curves({"a": _history([1.0])}, png, x="minutes")
+
+
+def test_curves_charge_each_run_at_its_policys_benchmarked_rate(tmp_path, capsys):
+    from corn_drake.cli import main
+    from corn_drake.config import TrainConfig
+    from corn_drake.io_utils import write_json
+    from corn_drake.run_config import write_run_config
+
+    for name, policy in (("a", "corn"), ("b", "state")):
+        (tmp_path / name).mkdir()
+        write_json(tmp_path / name / "metrics.json", {"history": _history([1.0] * 4)})
+        write_run_config(TrainConfig(policy=policy), tmp_path / name)
+    rates = tmp_path / "policies.json"
+    write_json(rates, {"benchmark": "policies",
+                       "results": {"train_steps_per_s": {"corn": 2.0, "state": 4.0}}})
+    summary = tmp_path / "s.json"
+    assert main(["curves", "--run", str(tmp_path / "a"), "--run", str(tmp_path / "b"),
+                 "--x", "hours", "--rates", str(rates), "--out", str(tmp_path / "c.png"),
+                 "--summary", str(summary)]) == 0
+    equal = json.loads(summary.read_text())["runs_at_equal_time"]
+    # 4 x 3600 steps: corn at 2 steps/s takes 2 h, state at 4 steps/s 1 h.
+    assert equal["hours"] == pytest.approx(1.0)
+    rows = {row["run"]: row for row in equal["runs"].values()}
+    assert rows[str((tmp_path / "a").resolve())]["step"] == 2 * 3600
+    assert rows[str((tmp_path / "a").resolve())]["final_hours"] == pytest.approx(2.0)
+    write_json(rates, {"benchmark": "policies", "results": {"train_steps_per_s": {"corn": 2.0}}})
+    assert main(["curves", "--run", str(tmp_path / "b"), "--x", "hours", "--rates", str(rates),
+                 "--out", str(tmp_path / "c.png")]) == 2
+    assert "no rate for run" in capsys.readouterr().err
+    write_json(rates, {"benchmark": "train", "results": {}})
+    assert main(["curves", "--run", str(tmp_path / "b"), "--x", "hours", "--rates", str(rates),
+                 "--out", str(tmp_path / "c.png")]) == 2
+    assert "not a `corn-drake bench policies` report" in capsys.readouterr().err
+
+
+def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path):
+    from corn_drake.cli import main
+
+    report = tmp_path / "p.json"
+    assert main(["bench", "policies", "--policies", "state,corn", "--envs", "2", "--updates", "1",
+                 "--warmup-updates", "0", "--rollout-steps", "4", "--report", str(report)]) == 0
+    results = json.loads(report.read_text())["results"]
+    assert set(results["train_steps_per_s"]) == {"state", "corn"}
+    assert all(r > 0 for r in results["train_steps_per_s"].values())
+    assert results["relative_to_reference"]["state"] == 1.0 and results["reference"] == "state"

@@ -53,10 +53,10 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 
     png = tmp_path / "both.png"
     assert curves.run(Namespace(runs=[str(tmp_path), str(tmp_path)], out=str(png), x="steps",
-                                rate="median", summary="")) == 0
+                                rate="median", rates="", summary="")) == 0
     assert png.stat().st_size > 1000
     with pytest.raises(FileNotFoundError, match="no checkpoints"):
-        curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png), x="steps", rate="median",
+        curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png), x="steps", rate="median", rates="",
                              summary=""))
 
 

@@ -27,6 +27,10 @@ def add_arguments(parser):
                         help="with --x hours and --summary: charge every update at the run's "
                              "median steps/s (default: steady when the core was shared for a "
                              "while) or at the steps/s it recorded")
+    parser.add_argument("--rates", default="",
+                        help="a `corn-drake bench policies` report: charge each run at its "
+                             "policy's training steps/s there (same-run, quiet-machine rates) "
+                             "instead of --rate")
     parser.add_argument("--summary", default="",
                         help="JSON path: each run's final step and hours, and every run at the "
                              "shortest run's training time (its step, training success there)")
@@ -57,30 +61,53 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
     return label, history
 
 
+def benchmarked_rates(path: str) -> dict[str, float]:
+    """policy -> training steps/s of a `corn-drake bench policies` report."""
+    report = read_json(path, "bench policies report")
+    rates = report.get("results", {}).get("train_steps_per_s") if isinstance(report, dict) else None
+    if report.get("benchmark") != "policies" or not isinstance(rates, dict):
+        raise InputError(f"--rates {path}: not a `corn-drake bench policies` report")
+    return rates
+
+
+def run_policy(run_dir: Path) -> str | None:
+    from corn_drake.run_config import load_run_config, run_config_path
+
+    return load_run_config(run_dir).policy if run_config_path(run_dir).is_file() else None
+
+
 def run(args) -> int:
     from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.viz.learning_curves import at_equal_time, plot_learning_curves, training_hours
 
     if args.summary:
         ensure_writable(Path(args.summary).parent, "--summary")
-    runs, folders = {}, {}
+    benchmarked = benchmarked_rates(args.rates) if args.rates else None
+    runs, folders, rates = {}, {}, {}
     for r in args.runs:
         label, history = run_history(Path(r))
         if label in runs:
             label = f"{label} [{len(runs)}]"  # the same run twice stays two lines
         runs[label], folders[label] = history, str(Path(r).resolve())
+        rates[label] = args.rate
+        if benchmarked is not None:
+            policy = run_policy(Path(r))
+            if policy not in benchmarked:
+                raise InputError(f"--rates {args.rates} has no rate for run {r}'s policy "
+                                 f"{policy!r} (it has {', '.join(benchmarked)})")
+            rates[label] = benchmarked[policy]
         if history and (args.x == "hours" or args.summary):
             try:
-                training_hours(history, args.rate)
+                training_hours(history, rates[label])
             except ValueError as e:
                 raise InputError(f"--run {r}: no training time can be read from its history ({e})") from None
     for label, history in runs.items():
         last = history[-1] if history else {}
         print(f"{label}: {last.get('step', 0)} steps, success {last.get('success_rate', 0.0):.2f}")
-    plot_learning_curves(runs, Path(args.out), x=args.x, rate=args.rate)
+    plot_learning_curves(runs, Path(args.out), x=args.x, rates=rates)
     print(f"wrote {args.out}")
     if args.summary:
-        equal = at_equal_time(runs, args.rate)
+        equal = at_equal_time(runs, rates)
         for label, row in equal["runs"].items():
             row["run"] = folders[label]  # what `corn-drake compare` matches reports to
         print(f"at the shortest run's {equal['hours']:.2f} training hours: " + "; ".join(

@@ -89,7 +89,8 @@ def requested_config(args, recorded):
     on top of the defaults and the base diagram), the layers in order: --task, the shortcut
     flags, --set. Repeating a run's original arguments gives its recorded config again."""
     from corn_drake.config import TrainConfig
-    from corn_drake.run_config import apply_sets, load_env_config, replace_task, set_fields
+    from corn_drake.run_config import (apply_sets, load_env_config, on_library, replace_task,
+                                       set_fields)
 
     if recorded is None:
         cfg = TrainConfig(env=load_env_config(args.task))
@@ -100,10 +101,7 @@ def requested_config(args, recorded):
         if value is not None:
             cfg = set_fields(cfg, {field: value}, "--" + dest.replace("_", "-"))
     if args.objects is not None:  # every train object of the library, a new one every episode
-        cfg = set_fields(cfg, {"env.scene.object.kind": "library",
-                               "env.scene.object.library": args.objects,
-                               "env.scene.object.library_objects": "train",
-                               "env.scene.object.object_id": ""}, "--objects")
+        cfg = on_library(cfg, args.objects)
     return apply_sets(cfg, args.set)
 
 

@@ -6,13 +6,15 @@ so the wall-clock a run spent training is the sum of steps / rate over its updat
 of the updates only (no start-up, nothing between a kill and the resume), as measured on the
 machine the run went on ("recorded"). On a machine whose one core is shared now and then (an
 evaluation beside the run halves its rate for a while), the run's median rate is the steadier
-measure of what the policy costs: "median" charges every update at it. The paper compares
-representations at equal steps and at equal time (its two panels); `corn-drake curves --x
-hours` draws the second.
+measure ("median"), and a same-run benchmark of every policy on a quiet machine (`corn-drake
+bench policies`) the fairest: a number of steps/s charges every update at that rate. The paper
+compares representations at equal steps and at equal time (its two panels); `corn-drake curves
+--x hours` draws the second.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -23,17 +25,21 @@ X_AXES = ("steps", "hours")
 RATES = ("median", "recorded")
 
 
-def training_hours(history: list[dict], rate: str = "median") -> np.ndarray:
+def training_hours(history: list[dict], rate: str | float = "median") -> np.ndarray:
     """Cumulative training hours at each history row (rows in step order), each update charged
-    at its recorded steps/s or at the run's median steps/s."""
-    if rate not in RATES:
-        raise ValueError(f"rate must be one of {RATES}, got {rate!r}")
+    at its recorded steps/s, at the run's median steps/s, or at `rate` steps/s (a number)."""
+    if isinstance(rate, str) and rate not in RATES:
+        raise ValueError(f"rate must be one of {RATES} or steps/s, got {rate!r}")
+    if not isinstance(rate, str) and not rate > 0:
+        raise ValueError(f"a rate in steps/s must be > 0, got {rate}")
     steps = np.array([h["step"] for h in history], dtype=float)
     rates = np.array([h["steps_per_s"] for h in history], dtype=float)
     if np.any(~(rates > 0)) or np.any(np.diff(steps) <= 0):
         raise ValueError("history rows need increasing steps and positive steps_per_s")
     if rate == "median":
         rates = np.full_like(rates, np.median(rates))
+    elif not isinstance(rate, str):
+        rates = np.full_like(rates, float(rate))
     per_update = np.diff(steps, prepend=0.0)
     return np.cumsum(per_update / rates) / 3600.0
 
@@ -52,27 +58,34 @@ def first_full_window(history: list[dict]) -> int:
     return int(np.argmax(done > 0)) if len(done) and done[-1] else len(history)
 
 
-def at_equal_time(runs: dict[str, list[dict]], rate: str = "median") -> dict:
+def rate_of(rates: Mapping[str, str | float] | str | float, label: str) -> str | float:
+    """The rate a run is charged at: one for all runs, or per run label."""
+    return rates[label] if isinstance(rates, Mapping) else rates
+
+
+def at_equal_time(runs: dict[str, list[dict]],
+                  rates: Mapping[str, str | float] | str | float = "median") -> dict:
     """Each run at the training time of the run that trained for the least: the step it had
     reached and its training success there (the last 100 training episodes, the curve's
     value). The time is the shortest run's, so every run has a row at or before it."""
-    hours = {label: training_hours(h, rate) for label, h in runs.items() if h}
+    hours = {label: training_hours(h, rate_of(rates, label)) for label, h in runs.items() if h}
     if not hours:
-        return {"hours": 0.0, "rate": rate, "runs": {}}
+        return {"hours": 0.0, "runs": {}}
     budget = min(float(t[-1]) for t in hours.values())
     rows = {}
     for label, t in hours.items():
         i = int(np.searchsorted(t, budget, side="right")) - 1
         row = runs[label][max(i, 0)]
         rows[label] = {"step": int(row["step"]), "hours": float(t[max(i, 0)]),
+                       "rate": rate_of(rates, label),
                        "training_success_rate": float(row["success_rate"]),
                        "final_step": int(runs[label][-1]["step"]),
                        "final_hours": float(t[-1])}
-    return {"hours": budget, "rate": rate, "runs": rows}
+    return {"hours": budget, "runs": rows}
 
 
 def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "steps",
-                         rate: str = "median") -> None:
+                         rates: Mapping[str, str | float] | str | float = "median") -> None:
     """Success rate and return against env steps or training hours, one line per run
     (label -> history rows)."""
     if x not in X_AXES:
@@ -90,12 +103,15 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "step
     fig = Figure(figsize=(9, 3.2))
     axes = fig.subplots(1, 2)
     for label, history in runs.items():
-        xs = training_hours(history, rate) if x == "hours" else np.array([h["step"] for h in history])
+        xs = (training_hours(history, rate_of(rates, label)) if x == "hours"
+              else np.array([h["step"] for h in history]))
         first = first_full_window(history)
         history, xs = history[first:], xs[first:]
         axes[0].plot(xs, [h["success_rate"] for h in history], label=label)
         axes[1].plot(xs, [h["return"] for h in history], label=label)
-    xlabel = f"training hours ({rate} steps/s, this machine)" if x == "hours" else "env steps"
+    kinds = {str(r) for r in (rates.values() if isinstance(rates, Mapping) else [rates])}
+    how = kinds.pop() if len(kinds) == 1 and kinds <= set(RATES) else "benchmarked"
+    xlabel = f"training hours ({how} steps/s, this machine)" if x == "hours" else "env steps"
     axes[0].set(xlabel=xlabel, ylabel="success rate (last 100 episodes)", ylim=(0, 1))
     axes[1].set(xlabel=xlabel, ylabel="episode return")
     if x == "steps":
