@@ -93,10 +93,11 @@ def test_curves_charge_each_run_at_its_policys_benchmarked_rate(tmp_path, capsys
     assert main(["curves", "--run", str(tmp_path / "b"), "--x", "hours", "--rates", str(rates),
                  "--out", str(tmp_path / "c.png")]) == 2
     assert "no rate for run" in capsys.readouterr().err
-    write_json(rates, {"benchmark": "train", "results": {}})
-    assert main(["curves", "--run", str(tmp_path / "b"), "--x", "hours", "--rates", str(rates),
-                 "--out", str(tmp_path / "c.png")]) == 2
-    assert "not a `corn-drake bench policies` report" in capsys.readouterr().err
+    for wrong in ({"benchmark": "train", "results": {}}, [1, 2]):
+        write_json(rates, wrong)
+        assert main(["curves", "--run", str(tmp_path / "b"), "--x", "hours", "--rates",
+                     str(rates), "--out", str(tmp_path / "c.png")]) == 2
+        assert "not a `corn-drake bench policies` report" in capsys.readouterr().err
 
 
 def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path):

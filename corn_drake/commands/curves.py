@@ -64,8 +64,9 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
 def benchmarked_rates(path: str) -> dict[str, float]:
     """policy -> training steps/s of a `corn-drake bench policies` report."""
     report = read_json(path, "bench policies report")
-    rates = report.get("results", {}).get("train_steps_per_s") if isinstance(report, dict) else None
-    if report.get("benchmark") != "policies" or not isinstance(rates, dict):
+    is_policies = isinstance(report, dict) and report.get("benchmark") == "policies"
+    rates = report.get("results", {}).get("train_steps_per_s") if is_policies else None
+    if not isinstance(rates, dict):
         raise InputError(f"--rates {path}: not a `corn-drake bench policies` report")
     return rates
 

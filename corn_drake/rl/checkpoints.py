@@ -98,8 +98,8 @@ def load_student_run(run_dir: str | Path):
 def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfig:
     """`cfg` with the encoder (when it names none) and, with take_policy, the policy of its
     init_from run filled in, after checking that the source's agent fits: same policy, critic
-    layout and feature normalisation, the same encoder file, a readable checkpoint.
-    InputError naming --init-from otherwise."""
+    layout and feature normalisation, the same encoder file. InputError naming --init-from
+    otherwise. (The Trainer reads the source's checkpoint, before `train` writes anything.)"""
     import dataclasses
 
     from corn_drake.errors import InputError
@@ -123,7 +123,6 @@ def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfi
     elif Path(cfg.encoder).resolve() != Path(encoder).resolve():
         raise InputError(f"--init-from {source}: it was trained on encoder {encoder}, this run "
                          f"names {cfg.encoder}; leave --encoder off to take the source's")
-    init_agent_state(source)  # readable before anything is written
     return cfg
 
 
