@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 
 from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.nn.threads import add_torch_threads_argument
 from corn_drake.policy_kinds import POLICY_KINDS
 
 NAME = "policies"
@@ -46,9 +47,7 @@ def add_arguments(parser):
                         help="PPO updates run first, untimed")
     parser.add_argument("--rollout-steps", type=positive_int, default=32)
     parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--torch-threads", type=positive_int, default=None,
-                        help="torch.set_num_threads for every policy (default: torch's own, as "
-                             "`train` runs)")
+    add_torch_threads_argument(parser, "every policy, as `train` takes it")
 
 
 def run(args) -> dict:

@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import Callable
 
 from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.nn.threads import add_torch_threads_argument
 from corn_drake.policy_kinds import POLICY_KINDS
 
 # The phases time_updates opens inside each window.
@@ -34,9 +35,8 @@ def add_trainer_arguments(parser) -> None:
     parser.add_argument("--rollout-steps", type=positive_int, default=32,
                         help="policy steps per env and update")
     parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--torch-threads", type=positive_int, default=None,
-                        help="torch.set_num_threads for this run (default: torch's own choice, "
-                             "as `train` runs); the report records the count used")
+    add_torch_threads_argument(parser, "this run, as `train` takes it; the report records the "
+                                       "count used")
 
 
 def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str = "cpu"):

@@ -37,6 +37,7 @@ REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 def add_arguments(parser):
     from corn_drake.config_student import SEGMENTATION_MODES
+    from corn_drake.nn.threads import add_torch_threads_argument
 
     parser.add_argument("--run", required=True,
                         help="run folder written by `corn-drake train` (teacher) or `corn-drake "
@@ -71,6 +72,7 @@ def add_arguments(parser):
                         help="teacher runs only: a kept checkpoint's file name in RUN/checkpoints "
                              "(e.g. step_000204800.pt, written with `train --set "
                              "snapshot_every=N`) instead of last.pt")
+    add_torch_threads_argument(parser, "the policy's inference")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -133,6 +135,7 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.evaluation import evaluate, success_by_group
     from corn_drake.io_utils import ensure_writable, write_json
+    from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.checkpoints import load_run_with_step
     from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
                                        replace_task)
@@ -209,8 +212,9 @@ def run(args) -> int:
         print(f"student perception: {student_cfg.segmentation.mode} segmentation + ICP tracking "
               f"(trained with {trained_with})")
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
-    report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
-                      out_dir, stochastic=args.stochastic, attention=args.attention)
+    with torch_threads(args.torch_threads):
+        report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
+                          out_dir, stochastic=args.stochastic, attention=args.attention)
     report.update(extra)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],

@@ -17,6 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.cli_types import finite_float, nonnegative_int, positive_int
+from corn_drake.nn.threads import add_torch_threads_argument
 from corn_drake.policy_kinds import POLICY_KINDS
 
 NAME = "train"
@@ -81,6 +82,8 @@ def add_arguments(parser):
     parser.add_argument("--device", default=None,
                         help="torch device of the agent, its batched inference and the PPO "
                              "update: cpu (default), cuda or cuda:N; the envs run on the CPU")
+    add_torch_threads_argument(parser, "the agent's inference and PPO updates (not recorded "
+                                       "in the run: it changes the speed, not the results)")
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -107,6 +110,7 @@ def requested_config(args, recorded):
 
 def run(args) -> int:
     from corn_drake.errors import InputError
+    from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.device import training_device
     from corn_drake.rl.encoders import load_encoder
     from corn_drake.rl.trainer import Trainer
@@ -149,7 +153,8 @@ def run(args) -> int:
         else:
             changes = config_changes(recorded, cfg)
             print(f"resume {out}: " + ("; ".join(map(str, changes)) or "as recorded"))
-        metrics = trainer.train(progress=not args.no_progress)
+        with torch_threads(args.torch_threads):
+            metrics = trainer.train(progress=not args.no_progress)
     print(f"trained {metrics['global_step']} steps; run folder {out}")
     return 0
 

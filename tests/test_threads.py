@@ -1,0 +1,41 @@
+"""The torch thread count the commands take by default (corn_drake/nn/threads.py)."""
+
+import argparse
+
+import pytest
+import torch
+
+from corn_drake.nn.threads import (ONE_CORE_THREADS, auto_torch_threads, torch_threads,
+                                   torch_threads_arg)
+
+
+@pytest.mark.parametrize("cpus, expected", [(1, ONE_CORE_THREADS), (2, ONE_CORE_THREADS),
+                                            (3, None), (16, None)])
+def test_auto_is_one_thread_on_small_machines_only(cpus, expected):
+    assert auto_torch_threads(cpus) == expected
+
+
+def test_argument_takes_auto_or_a_count():
+    assert torch_threads_arg("auto") == auto_torch_threads()
+    assert torch_threads_arg("3") == 3
+    for bad in ("0", "-1", "1.5", "two", ""):
+        with pytest.raises(argparse.ArgumentTypeError, match="'auto' or an integer"):
+            torch_threads_arg(bad)
+
+
+def test_count_is_set_inside_and_given_back_after():
+    before = torch.get_num_threads()
+    with torch_threads(1):
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == before
+    with torch_threads(None):  # torch's own: unchanged
+        assert torch.get_num_threads() == before
+
+
+def test_train_and_evaluate_default_to_auto():
+    from corn_drake.cli import build_parser
+
+    parser = build_parser()
+    train = parser.parse_args(["train", "--out", "somewhere"])
+    evaluate = parser.parse_args(["evaluate", "--run", "scripted", "--report", "r.json"])
+    assert train.torch_threads == evaluate.torch_threads == auto_torch_threads()
