@@ -105,8 +105,10 @@ def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path):
 
     report = tmp_path / "p.json"
     assert main(["bench", "policies", "--policies", "state,corn", "--envs", "2", "--updates", "1",
-                 "--warmup-updates", "0", "--rollout-steps", "4", "--report", str(report)]) == 0
+                 "--warmup-updates", "0", "--rollout-steps", "4", "--torch-threads", "1",
+                 "--report", str(report)]) == 0
     results = json.loads(report.read_text())["results"]
+    assert results["torch_threads"] == 1
     assert set(results["train_steps_per_s"]) == {"state", "corn"}
     assert all(r > 0 for r in results["train_steps_per_s"].values())
     assert results["relative_to_reference"]["state"] == 1.0 and results["reference"] == "state"

@@ -51,6 +51,8 @@ def add_arguments(parser):
 
 
 def run(args) -> dict:
+    import torch
+
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.timed_training import check_counts, run_trainer, train_config
     from corn_drake.config import TrainConfig
@@ -67,6 +69,7 @@ def run(args) -> dict:
     steps = args.envs * args.rollout_steps * args.updates  # timed, per policy
     rates = {}
     with torch_threads(args.torch_threads):
+        threads_used = torch.get_num_threads()
         for policy in args.policies:
             cfg = train_config(argparse.Namespace(**{**vars(args), "policy": policy}), env_cfg,
                                workers=0, envs_per_worker=args.envs)
@@ -84,4 +87,5 @@ def run(args) -> dict:
         "objects": args.objects or env_cfg.scene.object.kind,
         "envs": args.envs, "updates": args.updates, "warmup_updates": args.warmup_updates,
         "rollout_steps": args.rollout_steps, "steps_per_policy": steps,
+        "torch_threads": threads_used,
     }
