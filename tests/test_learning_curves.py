@@ -100,15 +100,25 @@ def test_curves_charge_each_run_at_its_policys_benchmarked_rate(tmp_path, capsys
         assert "not a `corn-drake bench policies` report" in capsys.readouterr().err
 
 
-def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path):
+def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path, monkeypatch):
+    from corn_drake.bench import timed_training
     from corn_drake.cli import main
 
+    trained = []  # (policy, separate critic) of each trainer the benchmark ran
+    original = timed_training.run_trainer
+
+    def run_trainer(cfg, *args, **kwargs):
+        trained.append((cfg.policy, cfg.ppo.separate_critic))
+        return original(cfg, *args, **kwargs)
+
+    monkeypatch.setattr(timed_training, "run_trainer", run_trainer)
     report = tmp_path / "p.json"
     assert main(["bench", "policies", "--policies", "state,corn", "--envs", "2", "--updates", "1",
                  "--warmup-updates", "0", "--rollout-steps", "4", "--torch-threads", "1",
-                 "--report", str(report)]) == 0
+                 "--set", "ppo.separate_critic=true", "--report", str(report)]) == 0
     results = json.loads(report.read_text())["results"]
-    assert results["torch_threads"] == 1
+    assert results["torch_threads"] == 1 and results["ppo_sets"] == ["ppo.separate_critic=true"]
+    assert trained == [("state", True), ("corn", True)]  # the --set reached every run
     assert set(results["train_steps_per_s"]) == {"state", "corn"}
     assert all(r > 0 for r in results["train_steps_per_s"].values())
     assert results["relative_to_reference"]["state"] == 1.0 and results["reference"] == "state"

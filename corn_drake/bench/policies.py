@@ -47,6 +47,10 @@ def add_arguments(parser):
                         help="PPO updates run first, untimed")
     parser.add_argument("--rollout-steps", type=positive_int, default=32)
     parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                        help="a PPO setting of the runs being timed, e.g. --set "
+                             "ppo.separate_critic=true (repeatable; ppo.* only: the update's "
+                             "cost depends on them, the envs' does not)")
     add_torch_threads_argument(parser, "every policy, as `train` takes it")
 
 
@@ -57,7 +61,7 @@ def run(args) -> dict:
     from corn_drake.bench.timed_training import check_counts, run_trainer, train_config
     from corn_drake.config import TrainConfig
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.run_config import load_env_config, on_library
+    from corn_drake.run_config import apply_sets, load_env_config, on_library
 
     env_cfg = load_env_config(args.task)
     if args.objects:
@@ -66,13 +70,15 @@ def run(args) -> dict:
         library_train_ids(args.objects)  # a library that cannot be cycled is named here
         env_cfg = on_library(TrainConfig(env=env_cfg), args.objects).env
     env_cfg.check()
+    apply_sets(TrainConfig(), args.set, only="ppo")  # a bad --set fails before any env is built
     steps = args.envs * args.rollout_steps * args.updates  # timed, per policy
     rates = {}
     with torch_threads(args.torch_threads):
         threads_used = torch.get_num_threads()
         for policy in args.policies:
-            cfg = train_config(argparse.Namespace(**{**vars(args), "policy": policy}), env_cfg,
-                               workers=0, envs_per_worker=args.envs)
+            cfg = apply_sets(train_config(argparse.Namespace(**{**vars(args), "policy": policy}),
+                                          env_cfg, workers=0, envs_per_worker=args.envs),
+                             args.set, only="ppo")
             timer = PhaseTimer()
             run_trainer(cfg, timer, args.warmup_updates)
             check_counts(timer, {timer.WINDOW: args.updates})
@@ -87,5 +93,5 @@ def run(args) -> dict:
         "objects": args.objects or env_cfg.scene.object.kind,
         "envs": args.envs, "updates": args.updates, "warmup_updates": args.warmup_updates,
         "rollout_steps": args.rollout_steps, "steps_per_policy": steps,
-        "torch_threads": threads_used,
+        "torch_threads": threads_used, "ppo_sets": list(args.set),
     }
