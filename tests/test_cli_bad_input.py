@@ -85,7 +85,7 @@ ROWS = [
     _row(f"train --minibatches 0 {OUT}", "--minibatches"),
     _row(f"train --init-log-std nan {OUT}", "--init-log-std"),
     _row(f"train --torch-threads 0 {OUT}", "--torch-threads"),
-    _row(f"train --torch-threads some {OUT}", "--torch-threads", "'auto' or an integer"),
+    _row(f"train --torch-threads some {OUT}", "--torch-threads", "'torch', 'auto' or an integer"),
     _row(f"train --policy bogus {OUT}", "--policy"),
     _row(f"train --set ppo.lrr=1 {OUT}", "--set ppo.lrr=1", "ppo.lrr"),
     _row(f"train --set task.episode_stepz=3 {OUT}", "task.episode_stepz"),

@@ -5,21 +5,20 @@ import argparse
 import pytest
 import torch
 
-from corn_drake.nn.threads import (ONE_CORE_THREADS, auto_torch_threads, torch_threads,
-                                   torch_threads_arg)
+from corn_drake.nn.threads import auto_torch_threads, torch_threads, torch_threads_arg
 
 
-@pytest.mark.parametrize("cpus, expected", [(1, ONE_CORE_THREADS), (2, ONE_CORE_THREADS),
-                                            (3, None), (16, None)])
+@pytest.mark.parametrize("cpus, expected", [(1, 1), (2, 1), (3, None), (16, None)])
 def test_auto_is_one_thread_on_small_machines_only(cpus, expected):
     assert auto_torch_threads(cpus) == expected
 
 
-def test_argument_takes_auto_or_a_count():
+def test_argument_takes_torch_auto_or_a_count():
+    assert torch_threads_arg("torch") is None
     assert torch_threads_arg("auto") == auto_torch_threads()
     assert torch_threads_arg("3") == 3
     for bad in ("0", "-1", "1.5", "two", ""):
-        with pytest.raises(argparse.ArgumentTypeError, match="'auto' or an integer"):
+        with pytest.raises(argparse.ArgumentTypeError, match="'torch', 'auto' or an integer"):
             torch_threads_arg(bad)
 
 
@@ -32,10 +31,12 @@ def test_count_is_set_inside_and_given_back_after():
         assert torch.get_num_threads() == before
 
 
-def test_train_and_evaluate_default_to_auto():
+def test_train_keeps_torchs_count_and_evaluate_takes_auto_by_default():
     from corn_drake.cli import build_parser
 
     parser = build_parser()
     train = parser.parse_args(["train", "--out", "somewhere"])
+    bench = parser.parse_args(["bench", "policies", "--report", "r.json"])
     evaluate = parser.parse_args(["evaluate", "--run", "scripted", "--report", "r.json"])
-    assert train.torch_threads == evaluate.torch_threads == auto_torch_threads()
+    assert train.torch_threads is None and bench.torch_threads is None
+    assert evaluate.torch_threads == auto_torch_threads()

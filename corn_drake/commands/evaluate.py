@@ -72,7 +72,7 @@ def add_arguments(parser):
                         help="teacher runs only: a kept checkpoint's file name in RUN/checkpoints "
                              "(e.g. step_000204800.pt, written with `train --set "
                              "snapshot_every=N`) instead of last.pt")
-    add_torch_threads_argument(parser, "the policy's inference")
+    add_torch_threads_argument(parser, "the policy's inference", default="auto")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 

@@ -83,7 +83,8 @@ def add_arguments(parser):
                         help="torch device of the agent, its batched inference and the PPO "
                              "update: cpu (default), cuda or cuda:N; the envs run on the CPU")
     add_torch_threads_argument(parser, "the agent's inference and PPO updates (not recorded "
-                                       "in the run: it changes the speed, not the results)")
+                                       "in the run: it changes the speed, not the results; 1 "
+                                       "when another busy process shares a small machine)")
     parser.add_argument("--no-progress", action="store_true")
 
 

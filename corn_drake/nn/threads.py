@@ -1,5 +1,15 @@
-"""torch's intra-op thread count: the count the commands use by default, and a block of code
-run at a given count with the caller's count given back after."""
+"""torch's intra-op thread count: the `--torch-threads` argument of the commands, and a block of
+code run at a given count with the caller's count given back after.
+
+Measured on a project machine (2 vCPUs giving one core of throughput), docs/results/README.md:
+- training, quiet: torch's 2 threads beat 1 by 5 % for `corn` and 20-50 % for `e2e` and `pn`,
+  whose PPO updates are heavy (bench policies, the runs' PPO settings, 5 timed updates);
+- training beside one other busy process: 2 threads wait on each other and train 4.5x slower
+  than 1 (bench train corn: 42 against 190-198 steps/s);
+- evaluation (one observation at a time): 1 and 2 threads level quiet (40 episodes in 23-26 s).
+So `train` and the trainer benchmarks keep torch's own count unless told (pass 1 when something
+else will run beside them), and `evaluate` takes one thread on such a machine ("auto").
+"""
 
 from __future__ import annotations
 
@@ -7,9 +17,8 @@ import argparse
 import contextlib
 import os
 
-# "auto" resolves to ONE_CORE_THREADS where the process may use at most this many CPUs.
+# "auto" resolves to one thread where the process may use at most this many CPUs.
 SMALL_MACHINE_CPUS = 2
-ONE_CORE_THREADS = 1
 
 
 def usable_cpus() -> int:
@@ -18,20 +27,17 @@ def usable_cpus() -> int:
 
 
 def auto_torch_threads(cpus: int | None = None) -> int | None:
-    """The thread count `train`, `evaluate` and the trainer benchmarks use unless told: 1 on a
-    machine with at most 2 usable CPUs, torch's own choice (None) on a larger one.
-
-    Why 1 here: the project machines' 2 vCPUs give one core of throughput, and a second torch
-    thread only helps while nothing else runs. Measured on one (bench train, corn, 32 envs,
-    alternated): quiet, 1 and 2 threads trained at 308 / 294 and 305 / 316 steps/s; with one
-    other busy process (a pretraining), 190 / 198 against 42 / 42, batch-32 inference taking
-    18 ms per env step with 2 threads against 0.7 ms with 1 (the threads wait on each other)."""
+    """"auto": 1 on a machine with at most SMALL_MACHINE_CPUS usable CPUs, torch's own count
+    (None) on a larger one."""
     cpus = usable_cpus() if cpus is None else cpus
-    return ONE_CORE_THREADS if cpus <= SMALL_MACHINE_CPUS else None
+    return 1 if cpus <= SMALL_MACHINE_CPUS else None
 
 
 def torch_threads_arg(text: str) -> int | None:
-    """argparse type of --torch-threads: 'auto' (auto_torch_threads) or an integer >= 1."""
+    """argparse type of --torch-threads: 'torch' (torch's own count: None), 'auto'
+    (auto_torch_threads) or an integer >= 1."""
+    if text == "torch":
+        return None
     if text == "auto":
         return auto_torch_threads()
     try:
@@ -39,16 +45,17 @@ def torch_threads_arg(text: str) -> int | None:
     except ValueError:
         value = 0
     if value < 1:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or an integer >= 1, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected 'torch', 'auto' or an integer >= 1, got {text!r}")
     return value
 
 
-def add_torch_threads_argument(parser, what: str) -> None:
-    """--torch-threads for a command that runs `what` (default: auto)."""
-    parser.add_argument("--torch-threads", type=torch_threads_arg, default="auto",
-                        help=f"torch intra-op threads for {what}: auto (default: 1 on a machine "
-                             f"with <= {SMALL_MACHINE_CPUS} usable CPUs, torch's own choice on a "
-                             "larger one) or a count")
+def add_torch_threads_argument(parser, what: str, default: str = "torch") -> None:
+    """--torch-threads for a command that runs `what`."""
+    parser.add_argument("--torch-threads", type=torch_threads_arg, default=default,
+                        help=f"torch intra-op threads for {what}: torch (torch's own count), "
+                             f"auto (1 on a machine with <= {SMALL_MACHINE_CPUS} usable CPUs, "
+                             f"torch's own on a larger one) or a count (default: {default}; "
+                             "nn/threads.py gives the measurements)")
 
 
 @contextlib.contextmanager
