@@ -140,21 +140,20 @@ def device_name(device) -> str:
 
 
 def run(args) -> dict:
-    import os
     import sys
 
     import torch
 
-    from corn_drake.nn.threads import torch_threads
+    from corn_drake.nn.threads import torch_threads, usable_cpus
     from corn_drake.rl.device import training_device
     from corn_drake.run_config import load_env_config
 
     device = training_device(args.device, "--device")  # before any env or Ray starts
     env_cfg = load_env_config(args.task)
     env_cfg.check()
-    usable_cpus = len(os.sched_getaffinity(0))
+    cpus = usable_cpus()
     counts = sorted(set(args.workers) | {1})  # 1 first: the baseline
-    warnings = oversubscription_warnings(counts, usable_cpus)
+    warnings = oversubscription_warnings(counts, cpus)
     for line in warnings:
         print(f"warning: {line}", file=sys.stderr)
     runs = []
@@ -186,7 +185,7 @@ def run(args) -> dict:
         "rollout_steps": args.rollout_steps,
         "device": str(device),
         "device_name": device_name(device),
-        "usable_cpus": usable_cpus,
+        "usable_cpus": cpus,
         "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),
         "torch_version": torch.__version__,

@@ -83,15 +83,13 @@ def breakdown(timer, bare_rate: float) -> tuple[dict, dict]:
 
 
 def run(args) -> dict:
-    import os
-
     import torch
 
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.sim import bare_physics_rate, check_replayable
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
-    from corn_drake.nn.threads import torch_threads
+    from corn_drake.nn.threads import torch_threads, usable_cpus
     from corn_drake.run_config import load_env_config
 
     env_cfg = load_env_config(args.task)
@@ -132,7 +130,7 @@ def run(args) -> dict:
         "sim_errors": sum(r["sim_errors"] for r in history),
         "physics_steps_per_policy_step": trainer.envs.envs[0].clock.substeps,
         "torque_backend": env_cfg.controller.torque_backend,
-        "usable_cpus": len(os.sched_getaffinity(0)),
+        "usable_cpus": usable_cpus(),
         "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),
     }
