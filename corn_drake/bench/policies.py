@@ -15,6 +15,8 @@ curves --x hours --rates REPORT` charges every run's steps at its policy's rate 
 from __future__ import annotations
 
 import argparse
+import copy
+import dataclasses
 
 from corn_drake.cli_types import nonnegative_int, positive_int
 from corn_drake.nn.threads import add_torch_threads_argument
@@ -70,15 +72,17 @@ def run(args) -> dict:
         library_train_ids(args.objects)  # a library that cannot be cycled is named here
         env_cfg = on_library(TrainConfig(env=env_cfg), args.objects).env
     env_cfg.check()
-    apply_sets(TrainConfig(), args.set, only="ppo")  # a bad --set fails before any env is built
+    # Parsed once, before any env is built (a bad --set fails here); every run gets a copy.
+    ppo = apply_sets(TrainConfig(), args.set, only="ppo").ppo
     steps = args.envs * args.rollout_steps * args.updates  # timed, per policy
     rates = {}
     with torch_threads(args.torch_threads):
         threads_used = torch.get_num_threads()
         for policy in args.policies:
-            cfg = apply_sets(train_config(argparse.Namespace(**{**vars(args), "policy": policy}),
-                                          env_cfg, workers=0, envs_per_worker=args.envs),
-                             args.set, only="ppo")
+            cfg = dataclasses.replace(
+                train_config(argparse.Namespace(**{**vars(args), "policy": policy}), env_cfg,
+                             workers=0, envs_per_worker=args.envs),
+                ppo=copy.deepcopy(ppo))
             timer = PhaseTimer()
             run_trainer(cfg, timer, args.warmup_updates)
             check_counts(timer, {timer.WINDOW: args.updates})

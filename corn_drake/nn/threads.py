@@ -17,6 +17,8 @@ import argparse
 import contextlib
 import os
 
+from corn_drake.cli_types import positive_int
+
 # "auto" resolves to one thread where the process may use at most this many CPUs.
 SMALL_MACHINE_CPUS = 2
 
@@ -41,12 +43,10 @@ def torch_threads_arg(text: str) -> int | None:
     if text == "auto":
         return auto_torch_threads()
     try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected 'torch', 'auto' or an integer >= 1, got {text!r}")
-    return value
+        return positive_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'torch', 'auto' or an integer >= 1, got {text!r}") from None
 
 
 def add_torch_threads_argument(parser, what: str, default: str = "torch") -> None:
