@@ -131,7 +131,12 @@ class PretrainLoop:
         kind = state.get("model_kind", self.cfg.model)
         if kind != self.cfg.model:
             raise InputError(f"{self.checkpoint} holds a {kind!r} model, not {self.cfg.model!r}")
-        self.model.load_state_dict(state["model"])
+        try:
+            self.model.load_state_dict(state["model"])
+        except RuntimeError as e:  # a network changed since (e.g. the PointNet's input channels)
+            raise InputError(f"{self.checkpoint} holds a {kind} model this version's network does "
+                             f"not fit ({str(e).strip().splitlines()[-1].strip()}); "
+                             "pretrain into a new folder") from None
         self.optimizer.load_state_dict(state["optimizer"])
         self.generator.set_state(state["generator"])
         if "rng" in state:  # absent in checkpoints written before it was kept

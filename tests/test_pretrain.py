@@ -237,3 +237,19 @@ def test_corrupt_pretraining_checkpoint_falls_back_to_the_previous_then_is_named
     assert main(_pretrain_args(data, out, steps=3)) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "last.pt" in err and "Traceback" not in err
+
+
+def test_a_checkpoint_whose_network_changed_is_named_not_dumped(data, tmp_path):
+    """A run folder of an older network (here: the PointNet's first layer cut back to the 12
+    input channels it had before the gripper-frame input) is refused naming the checkpoint."""
+    cfg = PretrainConfig(model="pointnet", steps=2, batch_size=4, warmup_steps=1, eval_every=100,
+                         checkpoint_every=100, eval_samples=16)
+    Pretrainer(cfg, data, tmp_path).train(progress=False)
+    last = tmp_path / "checkpoints" / "last.pt"
+    for path in (last, last.with_name("prev.pt")):
+        if path.exists():
+            state = torch.load(path, weights_only=False)
+            state["model"]["encoder.layers.0.0.weight"] = state["model"]["encoder.layers.0.0.weight"][:, :12]
+            torch.save(state, path)
+    with pytest.raises(InputError, match=r"last\.pt holds a pointnet model this version's network"):
+        Pretrainer(cfg, data, tmp_path)

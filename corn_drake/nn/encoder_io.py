@@ -117,6 +117,7 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
     try:
         state = torch.load(path, weights_only=False)
         network = make_network(state["kind"])
+        _refuse_pointnet_without_gripper_frame(path, state)
         network.load_state_dict(state["state_dict"])
         # encoder.pt files written before the normalisation was saved hold none: every one of
         # them was pretrained with the contract's ENCODER_INPUT_CENTER / ENCODER_INPUT_SCALE,
@@ -125,6 +126,8 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
         normalization = InputNormalization() if record is None else InputNormalization.from_record(record)
     # Garbage bytes fail in the unpickler, a truncated file in torch's zip reader, a checkpoint
     # of something else on its keys, its kind or its normalisation record.
+    except InputError:
+        raise
     except (KeyError, TypeError, ValueError, RuntimeError, EOFError, AttributeError,
             pickle.UnpicklingError) as e:
         raise InputError(f"encoder checkpoint {path} is not a saved encoder ({e})") from e
@@ -133,3 +136,15 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
     for p in encoder.parameters():
         p.requires_grad_(False)
     return encoder, state
+
+
+def _refuse_pointnet_without_gripper_frame(path: Path, state: dict) -> None:
+    """PointNet encoders saved before the gripper-frame input (nn/pointnet.py) have a 12-channel
+    first layer; say so by name rather than as a state_dict size mismatch."""
+    if state["kind"] != "pointnet":
+        return
+    first = state["state_dict"].get("layers.0.0.weight")
+    if first is not None and first.shape[1] == 12:
+        raise InputError(f"encoder checkpoint {path} is a PointNet from before the gripper-frame "
+                         "input (12 input channels; this version reads 15): pretrain it again "
+                         "with `corn-drake pretrain --model pointnet`")
