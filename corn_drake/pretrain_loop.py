@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.errors import InputError
+from corn_drake.errors import InputError, network_mismatch
 from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.encoder_io import NormalizedEncoder, save_encoder
 from corn_drake.nn.input_normalization import InputNormalization
@@ -134,9 +134,7 @@ class PretrainLoop:
         try:
             self.model.load_state_dict(state["model"])
         except RuntimeError as e:  # a network changed since (e.g. the PointNet's input channels)
-            raise InputError(f"{self.checkpoint} holds a {kind} model this version's network does "
-                             f"not fit ({str(e).strip().splitlines()[-1].strip()}); "
-                             "pretrain into a new folder") from None
+            raise network_mismatch(self.checkpoint, kind, e) from None
         self.optimizer.load_state_dict(state["optimizer"])
         self.generator.set_state(state["generator"])
         if "rng" in state:  # absent in checkpoints written before it was kept

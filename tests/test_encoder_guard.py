@@ -85,11 +85,13 @@ def test_equal_time_pointnet_is_its_own_row(tmp_path):
 
 
 def test_a_pointnet_from_before_the_gripper_frame_input_is_refused_by_name(tmp_path):
-    """Old 12-channel PointNet files fail with what they are, not a size-mismatch dump."""
+    """Old 12-channel PointNet files fail naming the file and the mismatch, not with a dump."""
     path = tmp_path / "old_pn.pt"
     save_encoder(path, make_policy_encoder("pointnet"))
     state = torch.load(path, weights_only=False)
     state["state_dict"]["layers.0.0.weight"] = state["state_dict"]["layers.0.0.weight"][:, :12]
     torch.save(state, path)
-    with pytest.raises(InputError, match=r"old_pn\.pt is a PointNet from before the gripper-frame"):
+    with pytest.raises(InputError, match=r"old_pn\.pt holds pointnet weights this version's network "
+                                         r"does not fit \(size mismatch for layers\.0\.0\.weight") as e:
         load_frozen_encoder(path)
+    assert "\n" not in str(e.value)

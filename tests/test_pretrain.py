@@ -251,5 +251,5 @@ def test_a_checkpoint_whose_network_changed_is_named_not_dumped(data, tmp_path):
             state = torch.load(path, weights_only=False)
             state["model"]["encoder.layers.0.0.weight"] = state["model"]["encoder.layers.0.0.weight"][:, :12]
             torch.save(state, path)
-    with pytest.raises(InputError, match=r"last\.pt holds a pointnet model this version's network"):
+    with pytest.raises(InputError, match=r"last\.pt holds pointnet weights this version's network"):
         Pretrainer(cfg, data, tmp_path)

@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from corn_drake.errors import InputError, MissingInputError
+from corn_drake.errors import InputError, MissingInputError, network_mismatch
 from corn_drake.io_utils import atomic_path
 from corn_drake.nn.input_normalization import InputNormalization
 
@@ -117,8 +117,10 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
     try:
         state = torch.load(path, weights_only=False)
         network = make_network(state["kind"])
-        _refuse_pointnet_without_gripper_frame(path, state)
-        network.load_state_dict(state["state_dict"])
+        try:
+            network.load_state_dict(state["state_dict"])
+        except RuntimeError as e:  # a network changed since (e.g. the PointNet's input channels)
+            raise network_mismatch(path, state["kind"], e) from None
         # encoder.pt files written before the normalisation was saved hold none: every one of
         # them was pretrained with the contract's ENCODER_INPUT_CENTER / ENCODER_INPUT_SCALE,
         # the only values ever used, which InputNormalization() holds.
@@ -137,14 +139,3 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
         p.requires_grad_(False)
     return encoder, state
 
-
-def _refuse_pointnet_without_gripper_frame(path: Path, state: dict) -> None:
-    """PointNet encoders saved before the gripper-frame input (nn/pointnet.py) have a 12-channel
-    first layer; say so by name rather than as a state_dict size mismatch."""
-    if state["kind"] != "pointnet":
-        return
-    first = state["state_dict"].get("layers.0.0.weight")
-    if first is not None and first.shape[1] == 12:
-        raise InputError(f"encoder checkpoint {path} is a PointNet from before the gripper-frame "
-                         "input (12 input channels; this version reads 15): pretrain it again "
-                         "with `corn-drake pretrain --model pointnet`")
