@@ -20,8 +20,8 @@ class MissingInputError(InputError, FileNotFoundError):
 
 def network_mismatch(path, kind: str, error: RuntimeError) -> InputError:
     """The error for saved weights (`path`) of a `kind` network whose shape has changed since
-    they were written (e.g. the PointNet's input channels): names the file and the first line
-    torch gives, not the whole size-mismatch dump."""
+    they were written (e.g. the PointNet's input channels): names the file and the last line of
+    torch's message (a mismatch), not the whole dump."""
     detail = str(error).strip().splitlines()[-1].strip()
     return InputError(f"{path} holds {kind} weights this version's network does not fit "
                       f"({detail}); pretrain it again into a new folder")

@@ -138,4 +138,3 @@ def _read_encoder_file(path: str | Path) -> tuple[NormalizedEncoder, dict]:
     for p in encoder.parameters():
         p.requires_grad_(False)
     return encoder, state
-
