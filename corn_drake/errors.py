@@ -18,10 +18,16 @@ class MissingInputError(InputError, FileNotFoundError):
     catch that for a missing file keep working."""
 
 
+def load_error_detail(error: Exception) -> str:
+    """The last line of a load_state_dict error (the mismatch itself, without torch's preamble),
+    or the error's type when it has no message: what a one-line InputError quotes."""
+    text = str(error).strip()
+    return text.splitlines()[-1].strip() if text else type(error).__name__
+
+
 def network_mismatch(path, kind: str, error: RuntimeError) -> InputError:
     """The error for saved weights (`path`) of a `kind` network whose shape has changed since
     they were written (e.g. the PointNet's input channels): names the file and the last line of
     torch's message (a mismatch), not the whole dump."""
-    detail = str(error).strip().splitlines()[-1].strip()
     return InputError(f"{path} holds {kind} weights this version's network does not fit "
-                      f"({detail}); pretrain it again into a new folder")
+                      f"({load_error_detail(error)}); pretrain it again into a new folder")

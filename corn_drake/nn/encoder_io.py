@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from corn_drake.errors import InputError, MissingInputError, network_mismatch
+from corn_drake.errors import InputError, MissingInputError, load_error_detail, network_mismatch
 from corn_drake.io_utils import atomic_path
 from corn_drake.nn.input_normalization import InputNormalization
 
@@ -99,7 +99,7 @@ def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]
         model.head.load_state_dict(state["contact_head"])
     except RuntimeError as e:
         raise InputError(f"encoder file {path}: its contact head does not fit this version "
-                         f"({str(e).strip().splitlines()[-1].strip()})") from None
+                         f"({load_error_detail(e)})") from None
     return model.eval(), encoder.normalization
 
 

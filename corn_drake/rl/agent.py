@@ -30,7 +30,7 @@ import torch
 from torch import nn
 
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
-from corn_drake.errors import InputError
+from corn_drake.errors import InputError, load_error_detail
 from corn_drake.nn.attention import PatchAttention, nearest_patch, patch_scores
 from corn_drake.nn.encoder_io import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
@@ -121,10 +121,9 @@ class TeacherAgent(nn.Module):
         try:
             self.load_state_dict(state)
         except RuntimeError as e:
-            detail = str(e).strip().splitlines()[-1].strip() if str(e).strip() else type(e).__name__
             raise InputError(f"{source}: the saved {self.kind!r} agent does not fit this version "
-                             f"({detail}); checkpoints written before the agent carried its "
-                             "normalisers cannot be loaded: train the run again") from None
+                             f"({load_error_detail(e)}); checkpoints written before the agent "
+                             "carried its normalisers cannot be loaded: train the run again") from None
 
     def update_normalizer(self, context: torch.Tensor) -> None:
         self.context_normalizer.update(context)

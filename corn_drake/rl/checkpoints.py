@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.config import TrainConfig
-from corn_drake.errors import MissingInputError
+from corn_drake.errors import MissingInputError, load_error_detail
 from corn_drake.io_utils import load_checkpoint
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.encoders import load_encoder
@@ -91,7 +91,7 @@ def load_student_run(run_dir: str | Path):
         student.load_state_dict(state["student"])
     except RuntimeError as e:
         raise InputError(f"{ckpt}: the saved student does not fit this version "
-                         f"({str(e).strip().splitlines()[-1].strip()})") from None
+                         f"({load_error_detail(e)})") from None
     return cfg, student.eval()
 
 

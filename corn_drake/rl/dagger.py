@@ -35,7 +35,7 @@ import torch
 
 from corn_drake.config_distill import DistillConfig
 from corn_drake.contract import STUDENT_OBS_KEYS
-from corn_drake.errors import InputError
+from corn_drake.errors import InputError, load_error_detail
 from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.nn.threads import torch_threads
@@ -144,7 +144,7 @@ class DaggerTrainer:
             self.student.load_state_dict(state["student"])
         except RuntimeError as e:
             raise InputError(f"{self.checkpoint_path}: the saved student does not fit this "
-                             f"version ({str(e).strip().splitlines()[-1].strip()})") from None
+                             f"version ({load_error_detail(e)})") from None
         self.optimizer.load_state_dict(state["optimizer"])
         restore_progress(self, state)
 
