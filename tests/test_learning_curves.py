@@ -52,16 +52,26 @@ def test_curves_against_hours_write_the_figure_and_summary(tmp_path):
     for name, rates in (("a", [2.0] * 4), ("b", [1.0] * 3)):
         (tmp_path / name).mkdir()
         write_json(tmp_path / name / "metrics.json", {"history": _history(rates)})
-    png, summary = tmp_path / "t.png", tmp_path / "out" / "s.json"
+    png, summary, history = tmp_path / "t.png", tmp_path / "out" / "s.json", tmp_path / "h" / "h.json"
     assert curves.run(Namespace(runs=[str(tmp_path / "a"), str(tmp_path / "b")], out=str(png),
-                                x="hours", rate="median", rates="", summary=str(summary))) == 0
+                                x="hours", rate="median", rates="", summary=str(summary),
+                                history=str(history))) == 0
     assert png.stat().st_size > 1000
     rows = json.loads(summary.read_text())["runs_at_equal_time"]["runs"]
     assert {r["step"] for r in rows.values()} == {4 * 3600, 2 * 3600}
+    # --history keeps every update's row of every run, with the run folder it came from.
+    kept = json.loads(history.read_text())["runs"]
+    assert {row["run"]: row["history"] for row in kept.values()} == {
+        str((tmp_path / "a").resolve()): _history([2.0] * 4),
+        str((tmp_path / "b").resolve()): _history([1.0] * 3)}
+    with pytest.raises(InputError, match="--history"):  # refused before anything is plotted
+        curves.run(Namespace(runs=[str(tmp_path / "a")], out=str(tmp_path / "u.png"), x="steps",
+                             rate="median", rates="", summary="", history=str(png / "h.json")))
+    assert not (tmp_path / "u.png").exists()
     write_json(tmp_path / "a" / "metrics.json", {"history": _history([2.0, -1.0])})
     with pytest.raises(InputError, match="no training time"):
         curves.run(Namespace(runs=[str(tmp_path / "a")], out=str(png), x="hours", rate="median", rates="",
-                             summary=""))
+                             summary="", history=""))
     with pytest.raises(ValueError, match="x must be"):
         plot_learning_curves({"a": _history([1.0])}, png, x="minutes")
 

@@ -53,11 +53,11 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 
     png = tmp_path / "both.png"
     assert curves.run(Namespace(runs=[str(tmp_path), str(tmp_path)], out=str(png), x="steps",
-                                rate="median", rates="", summary="")) == 0
+                                rate="median", rates="", summary="", history="")) == 0
     assert png.stat().st_size > 1000
     with pytest.raises(FileNotFoundError, match="no checkpoints"):
         curves.run(Namespace(runs=[str(tmp_path / "tb")], out=str(png), x="steps", rate="median", rates="",
-                             summary=""))
+                             summary="", history=""))
 
 
 def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_path):

@@ -34,6 +34,10 @@ def add_arguments(parser):
     parser.add_argument("--summary", default="",
                         help="JSON path: each run's final step and hours, and every run at the "
                              "shortest run's training time (its step, training success there)")
+    parser.add_argument("--history", default="",
+                        help="JSON path: each run's folder and every update's history row (the "
+                             "numbers the figure plots), kept beside the figure since a run "
+                             "folder may not outlive the machine it ran on")
 
 
 def run_history(run_dir: Path) -> tuple[str, list[dict]]:
@@ -81,8 +85,9 @@ def run(args) -> int:
     from corn_drake.io_utils import ensure_writable, write_json
     from corn_drake.viz.learning_curves import at_equal_time, plot_learning_curves, training_hours
 
-    if args.summary:
-        ensure_writable(Path(args.summary).parent, "--summary")
+    for path, argument in ((args.summary, "--summary"), (args.history, "--history")):
+        if path:
+            ensure_writable(Path(path).parent, argument)
     benchmarked = benchmarked_rates(args.rates) if args.rates else None
     runs, folders, rates = {}, {}, {}
     for r in args.runs:
@@ -107,6 +112,10 @@ def run(args) -> int:
         print(f"{label}: {last.get('step', 0)} steps, success {last.get('success_rate', 0.0):.2f}")
     plot_learning_curves(runs, Path(args.out), x=args.x, rates=rates)
     print(f"wrote {args.out}")
+    if args.history:
+        write_json(Path(args.history), {"runs": {label: {"run": folders[label], "history": history}
+                                                 for label, history in runs.items()}})
+        print(f"wrote {args.history}")
     if args.summary:
         equal = at_equal_time(runs, rates)
         for label, row in equal["runs"].items():
