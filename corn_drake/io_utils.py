@@ -22,7 +22,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yields a temporary path in the same folder; renames it onto `path` only on success."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temporary_prefix(path), suffix=".tmp", dir=path.parent)
     os.close(fd)
     # mkstemp creates 0600 files; give the result the permissions of a normally created file.
     umask = os.umask(0)
@@ -35,6 +35,19 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _temporary_prefix(path: Path) -> str:
+    return f".{path.name}."
+
+
+def remove_stale_temporaries(path: str | os.PathLike) -> None:
+    """Deletes the temporary files that atomic writes of `path` left behind when their process
+    was killed (SIGKILL, power loss: no `finally` runs). Only for a file one process writes at a
+    time, such as a run's checkpoints (the run folder's lock sees to that)."""
+    path = Path(path)
+    for stale in path.parent.glob(f"{_temporary_prefix(path)}*.tmp"):
+        stale.unlink(missing_ok=True)
 
 
 def write_json(path: str | os.PathLike, data: Any) -> None:
@@ -136,6 +149,8 @@ def save_checkpoint(path: str | os.PathLike, state: dict, keep_previous: bool = 
     import torch
 
     path = Path(path)
+    for written in (path, previous_checkpoint(path)):  # a killed earlier save's leftovers
+        remove_stale_temporaries(written)
     with atomic_path(path) as tmp:
         torch.save(state, tmp)
         if keep_previous and path.is_file() and _is_complete_torch_file(path):

@@ -130,6 +130,15 @@ def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_p
     assert load_checkpoint(path, required=("step",))["step"] == 3
     with pytest.raises(InputError, match="missing"):
         load_checkpoint(path, required=("agent",))
+    # Temporaries of saves killed mid-write (of last.pt and of its prev.pt copy) go at the next
+    # save; another file's temporary in the folder is not this save's to remove.
+    stale = [path.with_name(".last.pt.abc123.tmp"), path.with_name(".prev.pt.def456.tmp")]
+    other = path.with_name(".step_000000100.pt.ghi789.tmp")
+    for f in (*stale, other):
+        f.write_bytes(b"partial")
+    save_checkpoint(path, {"step": 4})
+    assert not any(f.exists() for f in stale) and other.exists()
+    assert load_checkpoint(path, required=("step",))["step"] == 4
 
 
 # --- item 2: evaluate checks its destinations before any episode ------------------------------
