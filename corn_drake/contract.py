@@ -125,3 +125,7 @@ def check_action(action) -> np.ndarray:
     if not np.isfinite(action).all():
         raise ValueError(f"action has non-finite entries at {np.flatnonzero(~np.isfinite(action)).tolist()}")
     return action
+
+# Finished episodes behind a training history row's success rate, return and tracking error (the
+# trainers' recent-episode window; the learning curves start where a run has filled it).
+RECENT_EPISODES = 100

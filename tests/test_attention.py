@@ -12,9 +12,9 @@ import torch
 from pydrake.geometry import Meshcat
 
 from corn_drake.errors import InputError
-from corn_drake.evaluation import run_episode
+from corn_drake.evaluation.episodes import run_episode
 from corn_drake.nn.attention import patch_scores
-from corn_drake.nn.encoder_io import make_policy_encoder
+from corn_drake.nn.encoder_files import make_policy_encoder
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.viz.attention_view import step_path, viridis_rgb
@@ -199,9 +199,9 @@ def test_viridis_colours_are_relative_to_the_steps_top_score():
 
 def _write_run(run, policy: str) -> None:
     """A run folder holding a fresh agent of `policy` (e2e/state need no encoder file)."""
-    from corn_drake.config import TrainConfig
-    from corn_drake.io_utils import save_checkpoint
-    from corn_drake.run_config import write_run_config
+    from corn_drake.config.training import TrainConfig
+    from corn_drake.storage.checkpoint_files import save_checkpoint
+    from corn_drake.run_folders.config_file import write_run_config
 
     cfg = TrainConfig(policy=policy)
     cfg.env.task.episode_steps = 3

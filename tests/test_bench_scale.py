@@ -13,7 +13,7 @@ import torch
 
 from corn_drake.bench import scale
 from corn_drake.cli import main
-from corn_drake.config import TrainConfig
+from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.trainer import Trainer, to_cpu
 
@@ -151,7 +151,7 @@ def test_a_run_resumes_on_another_device_with_the_same_policy(tmp_path, capsys, 
     agent loaded on the CPU."""
     from corn_drake.contract import ACTION_DIM, observation_shapes
     from corn_drake.rl.agent import TeacherAgent
-    from corn_drake.run_config import load_run_config
+    from corn_drake.run_folders.config_file import load_run_config
 
     run = tmp_path / "run"
     common = ["train", "--policy", "state", "--envs-per-worker", "2", "--rollout-steps", "4",

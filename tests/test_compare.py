@@ -3,7 +3,7 @@
 import json
 
 from corn_drake.cli import main
-from corn_drake.io_utils import write_json
+from corn_drake.storage.atomic_files import write_json
 
 
 def _report(path, policy, successes, run="", seeds=None, env_steps=4096):

@@ -21,7 +21,7 @@ import pytest
 
 import corn_drake
 from corn_drake import contract
-from corn_drake.policy_kinds import POLICY_KINDS
+from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 PACKAGE = Path(corn_drake.__file__).resolve().parent
 CONTRACT = PACKAGE / "contract.py"
@@ -289,7 +289,7 @@ def test_networks_take_the_contract_sizes(kind):
     import torch
 
     from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
-    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.pretrained_encoders import make_encoder
 
     agent = TeacherAgent(kind, make_encoder(kind))
     assert agent.context_normalizer.mean.shape == (contract.CONTEXT_DIM,)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from corn_drake.config import ControllerConfig
+from corn_drake.config.scene import ControllerConfig
 from corn_drake.scene.franka import EFFORT_LIMITS
 from corn_drake.systems.ik import ActionScaling, ActionToJointTargets, check_action
 from corn_drake.systems.impedance_controller import make_impedance_controller

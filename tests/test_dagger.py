@@ -12,10 +12,10 @@ import pytest
 import torch
 
 from corn_drake.cli import main as cli
-from corn_drake.config_distill import DistillConfig
+from corn_drake.config.training import DistillConfig
 from corn_drake.contract import ACTION_DIM, student_observation_shapes
-from corn_drake.io_utils import load_checkpoint
-from corn_drake.nn.encoder_io import make_policy_encoder, save_encoder
+from corn_drake.storage.checkpoint_files import load_checkpoint
+from corn_drake.nn.encoder_files import make_policy_encoder, save_encoder
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.dagger import gaussian_kl, window_loss, window_terms
 
@@ -212,7 +212,7 @@ def test_distill_refuses_a_student_run_as_teacher_and_a_teacher_without_encoder(
     # A folder with a student's config.yaml is no teacher run.
     fake = tmp_path / "fake"
     fake.mkdir()
-    from corn_drake.run_config import write_run_config
+    from corn_drake.run_folders.config_file import write_run_config
 
     write_run_config(DistillConfig(teacher=str(teacher)), fake)
     assert cli(["distill", "--teacher", str(fake), "--encoder", str(encoder), "--out",

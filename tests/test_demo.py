@@ -12,7 +12,7 @@ from corn_drake.cli import build_parser, main
 from corn_drake.commands.demo import SHIPPED_TEACHER, TASK
 from corn_drake.package_data import data_dir
 from tests.recordings import attention_in_recording
-from corn_drake.run_config import load_run_config
+from corn_drake.run_folders.config_file import load_run_config
 
 pytestmark = pytest.mark.slow
 

@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from corn_drake.config import TeacherDiagramConfig, load_config, load_config_string
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.loader import load_config
 from corn_drake.errors import InputError
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.scene.objects import ObjectSpec, box_spec
-from corn_drake.tasks.specs import PlanarGoal, PushFromHandGoal
+from corn_drake.config.task import PlanarGoal, PushFromHandGoal
 
 EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
                    "previous_action": (20,), "goal": (9,), "physics": (5,),
@@ -16,9 +17,9 @@ EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
 
 def _task(name: str) -> TeacherDiagramConfig:
     """The base diagram with the task overlay diagrams/tasks/NAME.yaml on top."""
-    from corn_drake.run_config import load_env_config
+    from corn_drake.config.diagram_files import load_teacher_config
 
-    return load_env_config(name)
+    return load_teacher_config(name)
 
 
 @pytest.fixture(scope="module")
@@ -106,11 +107,11 @@ def test_unknown_config_key_is_named(tmp_path):
     bad = tmp_path / "teacher.yaml"
     bad.write_text("scene:\n  physics:\n    time_stepp: 0.01\n")
     with pytest.raises(ValueError, match="time_stepp"):
-        load_config(bad, TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, bad)
     with pytest.raises(FileNotFoundError, match="nowhere.yaml"):
-        load_config(tmp_path / "nowhere.yaml", TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, tmp_path / "nowhere.yaml")
     with pytest.raises(ValueError, match="bogus"):
-        load_config_string("bogus: 1", TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, text="bogus: 1")
 
 
 def test_missing_mesh_path_is_named(tmp_path):
@@ -272,11 +273,11 @@ def test_object_radius_rescales_only_when_given_and_checks_its_range():
     env = TeacherEnv()
     env.reset(seed=0)
     assert env.episode.physics.scale == 1.0  # default: the object's own size
-    cfg = load_config_string("randomization: {object_radius: [0.03, 0.03]}", TeacherDiagramConfig)
+    cfg = load_config(TeacherDiagramConfig, text="randomization: {object_radius: [0.03, 0.03]}")
     env = TeacherEnv(cfg)
     env.reset(seed=0)
     assert np.isclose(env.episode.physics.scale * env.scene.object_spec.radius, 0.03)
     for bad in ("[0.0, 0.0]", "[0.05, 0.03]", "[0.03]"):
-        cfg = load_config_string(f"randomization: {{object_radius: {bad}}}", TeacherDiagramConfig)
+        cfg = load_config(TeacherDiagramConfig, text=f"randomization: {{object_radius: {bad}}}")
         with pytest.raises(InputError, match="randomization.object_radius"):
             TeacherEnv(cfg).reset(seed=0)

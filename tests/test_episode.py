@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from corn_drake.diagrams import build_teacher_diagram
+from corn_drake.builders.teacher import build_teacher_diagram
 from corn_drake.tasks.episode import sample_episode
 from corn_drake.timing import clock_of
 
@@ -53,7 +53,7 @@ def test_writing_an_episode_restores_the_defaults_first():
 
 
 def test_the_student_diagram_reuses_the_writer():
-    from corn_drake.diagrams_student import build_student_diagram
+    from corn_drake.builders.student import build_student_diagram
     from corn_drake.systems.cameras import rendering_available
 
     ok, reason = rendering_available()

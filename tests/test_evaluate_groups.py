@@ -5,7 +5,7 @@ import json
 import pytest
 
 from corn_drake.assets.library import object_groups
-from corn_drake.evaluation import success_by_group
+from corn_drake.evaluation.episodes import success_by_group
 from corn_drake.errors import InputError
 from tests.fixtures import write_tiny_library
 

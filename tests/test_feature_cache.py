@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config import TrainConfig
+from corn_drake.config.training import TrainConfig
 from corn_drake.contract import ACTION_DIM, observation_shapes
-from corn_drake.nn.encoder_io import make_policy_encoder
-from corn_drake.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
+from corn_drake.nn.encoder_files import make_policy_encoder
+from corn_drake.rl.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import StepResult

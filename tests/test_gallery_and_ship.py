@@ -6,7 +6,7 @@ import pytest
 from corn_drake.commands.gallery import montage
 from corn_drake.commands.ship import _check_report, library_arguments
 from corn_drake.errors import InputError
-from corn_drake.viz.gallery import _pick_steps, paint
+from corn_drake.viz.gallery import pick_steps, paint
 
 
 def test_paint_colours_only_points_the_depth_image_shows():
@@ -24,11 +24,11 @@ def test_paint_colours_only_points_the_depth_image_shows():
     assert (image == 0).all()  # the input is not drawn on
 
 
-def test_pick_steps_and_montage():
-    assert _pick_steps("start,middle,end", 101) == [0, 50, 100]
-    assert _pick_steps("3", 10) == [3]
+def testpick_steps_and_montage():
+    assert pick_steps("start,middle,end", 101) == [0, 50, 100]
+    assert pick_steps("3", 10) == [3]
     with pytest.raises(ValueError, match="outside"):
-        _pick_steps("12", 10)
+        pick_steps("12", 10)
     a, b = np.zeros((4, 5, 3), np.uint8), np.ones((4, 5, 3), np.uint8)
     m = montage([a, b])
     assert m.shape == (4, 18, 3) and (m[:, 5:13] == 255).all()

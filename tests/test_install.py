@@ -36,7 +36,7 @@ LEFT_BEHIND = shutil.ignore_patterns(".git", ".venv", "build", "*.egg-info", "__
 SNIPPET = """
 import json, sys
 import corn_drake
-from corn_drake.diagrams import build_teacher_diagram
+from corn_drake.builders.teacher import build_teacher_diagram
 from corn_drake.package_data import diagrams_dir, models_dir
 
 teacher = build_teacher_diagram()

@@ -47,7 +47,7 @@ def test_runs_at_equal_time_are_read_at_the_shortest_runs_hours():
 def test_curves_against_hours_write_the_figure_and_summary(tmp_path):
     from corn_drake.commands import curves
     from corn_drake.errors import InputError
-    from corn_drake.io_utils import write_json
+    from corn_drake.storage.atomic_files import write_json
 
     for name, rates in (("a", [2.0] * 4), ("b", [1.0] * 3)):
         (tmp_path / name).mkdir()
@@ -78,9 +78,9 @@ def test_curves_against_hours_write_the_figure_and_summary(tmp_path):
 
 def test_curves_charge_each_run_at_its_policys_benchmarked_rate(tmp_path, capsys):
     from corn_drake.cli import main
-    from corn_drake.config import TrainConfig
-    from corn_drake.io_utils import write_json
-    from corn_drake.run_config import write_run_config
+    from corn_drake.config.training import TrainConfig
+    from corn_drake.storage.atomic_files import write_json
+    from corn_drake.run_folders.config_file import write_run_config
 
     for name, policy in (("a", "corn"), ("b", "state")):
         (tmp_path / name).mkdir()

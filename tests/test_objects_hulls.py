@@ -13,7 +13,7 @@ from corn_drake.assets.hulls import HullConfig, drake_hull_problem, loadable_hul
 from corn_drake.assets.ingest import Rejected
 from corn_drake.assets.process import loadable_hulls
 from corn_drake.assets.stable_poses import _rotation_taking
-from corn_drake.config import SceneConfig
+from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 

@@ -9,7 +9,7 @@ from pydrake.math import RotationMatrix
 
 from corn_drake.assets.stable_poses import (DropConfig, _quat, _TableSim, _touching,
                                             find_stable_poses, second_setting)
-from corn_drake.config import SceneConfig
+from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.objects import ObjectSpec
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.systems.cameras import look_at, rendering_available
 
 ok, reason = rendering_available()
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.skipif(not ok, reason=reason)
 
 def _harness(mode="fixed", **camera):
     """A harness whose rig is in `mode`, with Drake CameraConfig fields set from `camera`."""
-    from corn_drake.perception_harness import PerceptionHarness
+    from corn_drake.builders.perception_harness import PerceptionHarness
 
     cfg = StudentDiagramConfig()
     cfg.cameras.mode = mode

@@ -10,9 +10,9 @@ import yaml
 from pydrake.common.yaml import yaml_dump_typed
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config import load_config_string
-from corn_drake.config_student import StudentDiagramConfig
-from corn_drake.diagrams_student import load_student_config, student_base_path
+from corn_drake.config.loader import load_config
+from corn_drake.config.student import StudentDiagramConfig
+from corn_drake.config.diagram_files import STUDENT_BASE_DIAGRAM, load_student_config
 from corn_drake.errors import InputError
 from corn_drake.systems.segmentation import dbscan_eps, outlier_points
 
@@ -46,7 +46,7 @@ def test_base_yaml_names_only_the_students_torque_noise():
     """The base diagram differs from the dataclass defaults in exactly the key it names."""
     assert _differences(load_student_config(), StudentDiagramConfig()) == {
         "teacher.randomization.torque_noise_std": (0.03, 0.0)}
-    text = student_base_path().read_text()
+    text = STUDENT_BASE_DIAGRAM.read_text()
     data = yaml.safe_load(text)
     assert data == {"teacher": {"randomization": {"torque_noise_std": 0.03}}}
 
@@ -93,7 +93,7 @@ def test_resolved_config_round_trips_through_yaml_and_pickle():
     cfg.cameras.camera.width = 32
     cfg.cameras.camera.focal = CameraConfig.FocalLength(x=40.0, y=41.0)
     # The text a run's config.yaml would hold loads back to the same config, and passes check.
-    again = load_config_string(yaml_dump_typed(cfg), StudentDiagramConfig)
+    again = load_config(StudentDiagramConfig, text=yaml_dump_typed(cfg))
     again.check()
     assert _differences(again, cfg) == {}
     # Ray ships configs to workers by pickle; Drake's CameraConfig travels as its YAML.

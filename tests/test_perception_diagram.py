@@ -6,7 +6,8 @@ import pytest
 from pydrake.math import RigidTransform
 
 from corn_drake.contract import ACTION_DIM
-from corn_drake.diagrams_student import build_student_diagram, load_student_config
+from corn_drake.builders.student import build_student_diagram
+from corn_drake.config.diagram_files import load_student_config
 from corn_drake.systems.cameras import rendering_available
 from corn_drake.systems.pose_tracker import pose7_to_matrix
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix
@@ -83,7 +84,7 @@ def test_student_noise_has_the_papers_size_in_metres_and_is_reseeded_per_episode
     """Cloud and goal-position noise: N(0, 0.005) in normalised units = 2 mm; the rotation part
     of the goal stays clean. reseed_random_sources (called at every episode's reset) gives new
     noise for each draw from an episode RNG, and the same noise for the same seed."""
-    from corn_drake.diagrams import reseed_random_sources
+    from corn_drake.builders.teacher import reseed_random_sources
 
     sd, ctx = _simulated_student(load_student_config(), seconds=0.1)
     d = sd.diagram

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from corn_drake.config_student import TrackerConfig
+from corn_drake.config.student import TrackerConfig
 from corn_drake.scene.objects import box_spec
 from corn_drake.systems.pose_tracker import icp, initial_state, pose_error, track_step
 

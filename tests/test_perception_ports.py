@@ -8,7 +8,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from corn_drake.contract import FREE_BODY_STATE_DIM
-from corn_drake.diagrams_student import _pose7_selector
+from corn_drake.builders.student import _pose7_selector
 from corn_drake.systems.cameras import CameraAim, look_at
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.scene.objects import box_spec
 from corn_drake.systems.cameras import rendering_available
 
@@ -17,7 +17,7 @@ Q_HAND_DOWN = [-0.0009, 0.3635, 0.0008, -2.3874, 0.0007, 2.7508, 0.7846]
 
 
 def _harness(spec=None, **seg):
-    from corn_drake.perception_harness import PerceptionHarness
+    from corn_drake.builders.perception_harness import PerceptionHarness
 
     cfg = StudentDiagramConfig()
     for k, v in seg.items():
@@ -91,7 +91,7 @@ def test_nothing_in_view_gives_an_empty_cloud_and_zero_points():
 
 def test_d435_resolution_works_after_voxel_thinning():
     """640 x 480 per camera (a real D435): thinned to 4 mm voxels, still only object points."""
-    from corn_drake.perception_harness import PerceptionHarness
+    from corn_drake.builders.perception_harness import PerceptionHarness
 
     cfg = StudentDiagramConfig()
     cfg.cameras.camera.width, cfg.cameras.camera.height = 640, 480

@@ -10,7 +10,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.perception import BaseField, Fields, PointCloud
 
-from corn_drake.config_student import StudentDiagramConfig, TrackerConfig
+from corn_drake.config.student import StudentDiagramConfig, TrackerConfig
 from corn_drake.scene.objects import box_spec
 from corn_drake.systems.cameras import rendering_available
 from corn_drake.systems.pose_tracker import PoseTracker, matrix_to_pose7
@@ -98,7 +98,7 @@ def test_state_lives_in_the_context(tracker):
 def test_object_leaving_the_view_inside_a_simulation():
     from pydrake.systems.analysis import Simulator
 
-    from corn_drake.diagrams_student import build_student_diagram
+    from corn_drake.builders.student import build_student_diagram
 
     cfg = StudentDiagramConfig()
     cfg.teacher.randomization.torque_noise_std = 0.0

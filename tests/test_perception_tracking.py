@@ -13,8 +13,8 @@ pytestmark = pytest.mark.skipif(not ok, reason=reason)
 
 
 def test_a_slid_and_turned_object_is_tracked_within_1cm_and_5deg():
-    from corn_drake.perception_harness import (PerceptionHarness, slide_and_turn_poses,
-                                               track_sequence)
+    from corn_drake.builders.perception_harness import (PerceptionHarness, slide_and_turn_poses,
+                                                        track_sequence)
     from corn_drake.scene.objects import box_spec
 
     spec = box_spec([0.12, 0.06, 0.03], 0.3)

@@ -27,7 +27,7 @@ def test_first_layer_reads_points_in_the_gripper_frame():
     computed here independently from the quaternion (numpy) rather than the 6D rotation."""
     import numpy as np
 
-    from corn_drake.contact.pretrain import hand9
+    from corn_drake.pretraining.contact import hand9
     from corn_drake.nn.input_normalization import InputNormalization
     from corn_drake.nn.pointnet import PointNetEncoder
     from corn_drake.transforms import quat_wxyz_to_matrix

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from corn_drake.contract import ACTION_DIM
-from corn_drake.evaluation import run_episode
+from corn_drake.evaluation.episodes import run_episode
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.env import TeacherEnv
 
@@ -107,7 +107,7 @@ def test_stochastic_evaluation_samples_from_a_random_source_seeded_per_episode()
 
 
 def test_stochastic_policy_needs_an_agent():
-    from corn_drake.diagrams import build_teacher_diagram
+    from corn_drake.builders.teacher import build_teacher_diagram
 
     with pytest.raises(ValueError, match="needs an agent"):
         build_teacher_diagram(stochastic_policy=True)

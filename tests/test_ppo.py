@@ -7,7 +7,7 @@ from torch import nn
 from corn_drake.errors import InputError
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RewardScaler, RunningMeanStd
-from corn_drake.config import PPOConfig
+from corn_drake.config.training import PPOConfig
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
 
 

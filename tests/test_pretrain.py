@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config import PretrainConfig
-from corn_drake.contact.pretrain import Pretrainer, augment, hand9, patch_labels, prepare
+from corn_drake.config.pretraining import PretrainConfig
+from corn_drake.pretraining.contact import Pretrainer, augment, hand9, patch_labels, prepare
 from corn_drake.contact.runner import generate_dataset
 from corn_drake.contract import ENCODER_INPUT_CENTER, ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import (NormalizedEncoder, load_contact_model, load_frozen_encoder,
-                                      make_network, save_encoder)
+from corn_drake.nn.encoder_files import (NormalizedEncoder, load_contact_model, load_frozen_encoder,
+                                         make_network, save_encoder)
 from corn_drake.nn.geometry import quat_wxyz_to_matrix
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from corn_drake.config import TaskConfig
+from corn_drake.config.task import TaskConfig
 from corn_drake.contract import ACTION_DIM
 from corn_drake.systems.reward import TaskReward, keypoint_potential
 from corn_drake.transforms import yaw_matrix
@@ -124,21 +124,21 @@ def test_hold_in_the_teacher_diagram_latches_the_previous_policy_step():
 def test_energy_meter_is_built_only_when_the_task_pays_for_energy():
     """With energy_coef 0 the diagram has no meter (it would run every physics step for a term
     multiplied by zero), and the reward is the same as with a meter and coefficient 0."""
-    from corn_drake.diagrams import build_teacher_diagram
-    from corn_drake.run_config import load_env_config
+    from corn_drake.builders.teacher import build_teacher_diagram
+    from corn_drake.config.diagram_files import load_teacher_config
     from corn_drake.rl.env import TeacherEnv
 
     def names(cfg):
         return {s.get_name() for s in build_teacher_diagram(cfg).diagram.GetSystems()}
 
-    paid = load_env_config()
+    paid = load_teacher_config()
     assert paid.task.energy_coef > 0 and "energy_meter" in names(paid)
-    free = load_env_config("push")
+    free = load_teacher_config("push")
     assert free.task.energy_coef == 0 and "energy_meter" not in names(free)
 
     rewards = []
     for coef in (0.0, 1e-30):  # 1e-30: the meter is built, its term is nothing
-        cfg = load_env_config("push")
+        cfg = load_teacher_config("push")
         cfg.task.energy_coef = coef
         env = TeacherEnv(cfg)
         env.reset(seed=4)

@@ -7,12 +7,16 @@ import pickle
 import pytest
 import yaml
 
-from corn_drake import run_config
+from corn_drake.config import diagram_files as run_config
 from corn_drake.cli import main
-from corn_drake.config import ObjectConfig, TeacherDiagramConfig, TrainConfig, config_fields
+from corn_drake.config.scene import ObjectConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.training import TrainConfig
+from corn_drake.config.yaml_io import config_fields
 from corn_drake.errors import InputError
-from corn_drake.run_config import (apply_sets, config_changes, load_base_config, load_env_config,
-                                   load_run_config)
+from corn_drake.config.overrides import apply_sets, config_changes
+from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.run_folders.config_file import load_run_config
 
 # A task overlay: only what differs from the base (keys every TaskConfig keeps).
 OVERLAY = "task:\n  name: mytask\n  episode_steps: 7\ncontroller:\n  max_position_delta: 0.03\n"
@@ -32,7 +36,7 @@ def tasks_dir(tmp_path, monkeypatch):
 def test_the_base_diagram_names_only_what_differs_from_the_defaults():
     named = yaml.safe_load(run_config.BASE_DIAGRAM.read_text()) or {}
     defaults = config_fields(TeacherDiagramConfig())
-    base = config_fields(load_base_config())
+    base = config_fields(load_teacher_config())
     # Every key the file names changes its default, and nothing else changes (today: no key;
     # the dataclass defaults are the paper's task).
     assert set(_leaves(named)) == {k for k in defaults if base[k] != defaults[k]}
@@ -45,35 +49,35 @@ def _leaves(data, prefix=""):
 
 
 def test_a_task_overlay_changes_only_what_it_names(tasks_dir, tmp_path):
-    base = config_fields(load_base_config())
+    base = config_fields(load_teacher_config())
     for task in ("mytask", tasks_dir / "mytask.yaml", str(tasks_dir / "mytask.yaml")):
-        cfg = load_env_config(task)
+        cfg = load_teacher_config(task)
         assert (cfg.task.name, cfg.task.episode_steps) == ("mytask", 7)
         assert cfg.controller.max_position_delta == 0.03
-        changed = {c.key for c in config_changes(load_base_config(), cfg)}
+        changed = {c.key for c in config_changes(load_teacher_config(), cfg)}
         assert changed == {"task.name", "task.episode_steps", "controller.max_position_delta"}
     # Without task.name the task is named by its file.
-    assert load_env_config("short").task.name == "short"
+    assert load_teacher_config("short").task.name == "short"
     other = tmp_path / "elsewhere" / "wide_push.yml"
     other.parent.mkdir()
     other.write_text("task:\n  episode_steps: 20\n")
-    assert load_env_config(other).task.name == "wide_push"
-    assert config_fields(load_env_config(None)) == base
+    assert load_teacher_config(other).task.name == "wide_push"
+    assert config_fields(load_teacher_config(None)) == base
 
 
 def test_task_names_and_files_are_checked(tasks_dir, tmp_path):
     with pytest.raises(InputError, match="--task nosuch: no such task; the tasks are "
                                          "mytask, short"):
-        load_env_config("nosuch")
+        load_teacher_config("nosuch")
     with pytest.raises(FileNotFoundError, match="nowhere.yaml"):
-        load_env_config(tmp_path / "nowhere.yaml")
+        load_teacher_config(tmp_path / "nowhere.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("controller:\n  max_position_delta: far\n")
     with pytest.raises(InputError, match=r"bad.yaml.*controller.max_position_delta"):
-        load_env_config(bad)
+        load_teacher_config(bad)
     bad.write_text("task:\n  episode_stepz: 3\n")
     with pytest.raises(InputError, match=r"bad.yaml.*episode_stepz"):
-        load_env_config(bad)
+        load_teacher_config(bad)
 
 
 def test_set_overrides_address_the_run_config_and_say_what_they_changed():
@@ -120,7 +124,7 @@ def test_physics_holds_drakes_plant_config():
     from pydrake.common.yaml import yaml_dump_typed
     from pydrake.multibody.plant import MultibodyPlantConfig
 
-    from corn_drake.diagrams import build_teacher_diagram
+    from corn_drake.builders.teacher import build_teacher_diagram
 
     cfg = apply_sets(TrainConfig(), ["scene.physics.plant.time_step=0.01",
                                      "scene.physics.plant.discrete_contact_approximation=lagged"])
@@ -153,7 +157,7 @@ def test_object_config_names_one_object_or_all_train_objects():
                        (ObjectConfig(kind="sphere"), "kind must be one of")]:
         with pytest.raises(InputError, match=named):
             bad.check()
-    from corn_drake.diagrams import object_spec_from_config
+    from corn_drake.builders.teacher import object_spec_from_config
 
     with pytest.raises(InputError, match="library_objects: train"):
         object_spec_from_config(whole)
@@ -201,3 +205,19 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
     from corn_drake.commands.curves import run_history
 
     assert run_history(run)[0] == "state on mytask (run)"
+
+
+def test_overrides_apply_to_any_run_config_and_refuse_unknown_keys():
+    # The one override mechanism serves DistillConfig as well as TrainConfig: its env sections
+    # are named without `env.`, and the config given is not modified.
+    from corn_drake.config.overrides import apply_sets
+    from corn_drake.config.training import DistillConfig
+
+    cfg = DistillConfig()
+    out = apply_sets(cfg, ["cameras.mode=tracking", "window=4", "env.tracker.min_points=30"])
+    assert (out.env.cameras.mode, out.window, out.env.tracker.min_points) == ("tracking", 4, 30)
+    assert (cfg.env.cameras.mode, cfg.window) == ("fixed", 8)
+    with pytest.raises(InputError, match="unknown key 'bogus'"):
+        apply_sets(cfg, ["bogus=1"])
+    with pytest.raises(InputError, match="teacher is a value"):
+        apply_sets(cfg, ["teacher.seed=1"])

@@ -16,8 +16,8 @@ import torch
 
 from corn_drake.cli import main
 from corn_drake.errors import InputError
-from corn_drake.run_config import load_run_config
-from corn_drake.run_folder import LOCK_NAME, lock_folder
+from corn_drake.run_folders.config_file import load_run_config
+from corn_drake.run_folders.guards import LOCK_NAME, lock_folder
 from tests.fixtures import write_tiny_library
 from tests.paths import REPO_ROOT
 
@@ -117,7 +117,7 @@ def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
 
 
 def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_path):
-    from corn_drake.io_utils import load_checkpoint, save_checkpoint
+    from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 
     path = tmp_path / "checkpoints" / "last.pt"
     assert load_checkpoint(path) is None  # nothing to resume
@@ -145,7 +145,7 @@ def test_checkpoint_save_keeps_the_previous_and_never_rotates_a_broken_one(tmp_p
 @pytest.mark.parametrize("record", ["0", "1"])
 def test_evaluate_refuses_an_unwritable_destination_before_any_episode(
         tmp_path, capsys, monkeypatch, record):
-    from corn_drake import evaluation
+    from corn_drake.evaluation import episodes as evaluation
 
     def no_episode(*args, **kwargs):
         raise AssertionError("episodes ran before the destination was checked")
@@ -198,7 +198,7 @@ def test_second_train_into_a_running_run_is_refused_and_a_killed_one_leaves_no_l
 def test_every_writing_command_refuses_a_locked_folder(tmp_path, capsys, command):
     out = tmp_path / "out"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from corn_drake.run_folder import lock_folder\n"
+        [sys.executable, "-c", "import sys, time; from corn_drake.run_folders.guards import lock_folder\n"
          "with lock_folder(sys.argv[1]):\n    print('locked', flush=True); time.sleep(60)", str(out)],
         env=ENV, stdout=subprocess.PIPE, text=True)
     try:
@@ -338,7 +338,7 @@ def _running(process) -> bool:
 
 
 def test_a_failure_before_any_output_leaves_no_trace_but_one_after_keeps_the_record(tmp_path):
-    from corn_drake.run_folder import resume_arguments
+    from corn_drake.run_folders.guards import resume_arguments
 
     fresh = tmp_path / "fresh"
     with pytest.raises(RuntimeError):

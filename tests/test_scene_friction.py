@@ -5,7 +5,7 @@ import pytest
 from pydrake.multibody.plant import CalcContactFrictionFromSurfaceProperties
 from pydrake.systems.framework import DiagramBuilder
 
-from corn_drake.config import SceneConfig
+from corn_drake.config.scene import SceneConfig
 from corn_drake.errors import InputError
 from corn_drake.scene.builder import build_scene
 from corn_drake.scene.friction import geometry_friction

@@ -7,8 +7,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from corn_drake.config import SceneConfig
-from corn_drake.evaluation import run_episode
+from corn_drake.config.scene import SceneConfig
+from corn_drake.evaluation.episodes import run_episode
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.rl.scripted import ScriptedPushAgent
 from corn_drake.scene.builder import build_scene

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config import PPOConfig
+from corn_drake.config.training import PPOConfig
 from corn_drake.contract import observation_shapes
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.ppo import PPO, sample_actions

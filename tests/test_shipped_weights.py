@@ -12,7 +12,7 @@ import torch
 from corn_drake.cli import main
 from corn_drake.commands.ship import library_arguments
 from corn_drake.package_data import data_dir
-from corn_drake.run_config import load_run_config
+from corn_drake.run_folders.config_file import load_run_config
 
 REPO = Path(__file__).resolve().parents[1]
 WEIGHTS = data_dir("models") / "weights"

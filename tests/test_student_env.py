@@ -5,7 +5,7 @@ import pytest
 
 from corn_drake.contract import (ACTION_DIM, OBS_KEYS, ROBOT_STATE_DIM, STUDENT_OBS_KEYS,
                                  observation_shapes)
-from corn_drake.diagrams_student import load_student_config
+from corn_drake.config.diagram_files import load_student_config
 from corn_drake.errors import InputError
 from corn_drake.rl.env import TeacherEnv
 from corn_drake.rl.student_env import StudentEnv

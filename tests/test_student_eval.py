@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from corn_drake.cli import main
-from corn_drake.config_distill import DistillConfig
+from corn_drake.config.training import DistillConfig
 from corn_drake.contract import STUDENT_OBS_KEYS
-from corn_drake.diagrams_student import load_student_config
-from corn_drake.io_utils import load_checkpoint, save_checkpoint
+from corn_drake.config.diagram_files import load_student_config
+from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.student_env import StudentEnv
-from corn_drake.run_config import write_run_config
+from corn_drake.run_folders.config_file import write_run_config
 from corn_drake.systems.ik import ActionScaling
 
 
@@ -230,7 +230,7 @@ def _one_error_line(capsys, *needles: str) -> None:
 
 
 def test_evaluate_names_a_run_of_neither_kind_and_perception_without_a_student(tmp_path, capsys):
-    from corn_drake.config import TrainConfig
+    from corn_drake.config.training import TrainConfig
 
     report = tmp_path / "r.json"
     odd = tmp_path / "odd"

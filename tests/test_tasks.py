@@ -7,12 +7,15 @@ import pytest
 import yaml
 
 from corn_drake import DIAGRAMS_DIR
-from corn_drake.config import TaskConfig, TeacherDiagramConfig, load_config, load_config_string
+from corn_drake.config.task import TaskConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.loader import load_config
 from corn_drake.errors import InputError
-from corn_drake.run_config import apply_sets, available_tasks, config_changes, load_env_config
+from corn_drake.config.overrides import apply_sets, config_changes
+from corn_drake.config.diagram_files import available_tasks, load_teacher_config
 from corn_drake.scene.objects import box_spec
 from corn_drake.tasks.sampling import TABLE_MARGIN, sample_object_and_goal, sample_robot_joints
-from corn_drake.tasks.specs import Full6dGoal, PlanarGoal, PushFromHandGoal
+from corn_drake.config.task import Full6dGoal, PlanarGoal, PushFromHandGoal
 from corn_drake.transforms import quat_wxyz_to_matrix
 
 SPEC = box_spec([0.09, 0.07, 0.05], 0.3)
@@ -147,17 +150,15 @@ def test_robot_joints_stay_in_the_ranges_plus_noise():
 
 
 def test_goal_variant_is_chosen_by_its_yaml_tag():
-    cfg = load_config_string("task:\n  goal: !PlanarGoal {distance: [0.1, 0.15]}\n",
-                             TeacherDiagramConfig)
+    cfg = load_config(TeacherDiagramConfig, text="task:\n  goal: !PlanarGoal {distance: [0.1, 0.15]}\n")
     assert cfg.task.goal == PlanarGoal(distance=[0.1, 0.15])
-    assert isinstance(load_config_string("task: {name: x}", TeacherDiagramConfig).task.goal,
+    assert isinstance(load_config(TeacherDiagramConfig, text="task: {name: x}").task.goal,
                       Full6dGoal)
     with pytest.raises(InputError, match="SpiralGoal"):
-        load_config_string("task:\n  goal: !SpiralGoal {}\n", TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, text="task:\n  goal: !SpiralGoal {}\n")
     # A field of another variant is refused, not ignored.
     with pytest.raises(InputError, match="heading_spread"):
-        load_config_string("task:\n  goal: !PlanarGoal {heading_spread: 0.5}\n",
-                           TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, text="task:\n  goal: !PlanarGoal {heading_spread: 0.5}\n")
 
 
 class _TagLoader(yaml.SafeLoader):
@@ -189,8 +190,8 @@ def _restated_defaults(overlay, default, path=""):
 @pytest.mark.parametrize("name", ["full6d", "planar", "planar_near", "push"])
 def test_task_overlays_name_their_task_and_only_what_differs(name):
     path = DIAGRAMS_DIR / "tasks" / f"{name}.yaml"
-    cfg = load_config(path, TeacherDiagramConfig)  # on its own: the missing keys are defaults
-    assert cfg.task.name == name and load_env_config(name).task.name == name
+    cfg = load_config(TeacherDiagramConfig, path)  # on its own: the missing keys are defaults
+    assert cfg.task.name == name and load_teacher_config(name).task.name == name
     overlay = yaml.load(path.read_text(), Loader=_TagLoader)
     restated = [k for k in _restated_defaults(overlay, TeacherDiagramConfig()) if k != "task.name"
                 or name != "full6d"]
@@ -198,10 +199,10 @@ def test_task_overlays_name_their_task_and_only_what_differs(name):
 
 
 def test_task_overlays_choose_their_goal_variant():
-    goals = {n: type(load_env_config(n).task.goal) for n in available_tasks()}
+    goals = {n: type(load_teacher_config(n).task.goal) for n in available_tasks()}
     assert goals == {"full6d": Full6dGoal, "planar": PlanarGoal, "planar_near": PlanarGoal,
                      "push": PushFromHandGoal, "push_turn": PushFromHandGoal}
-    push = load_env_config("push")
+    push = load_teacher_config("push")
     assert not push.task.check_orientation and push.controller.max_position_delta == 0.03
     # Every overlay is listed in the folder's README.
     readme = (DIAGRAMS_DIR / "tasks" / "README.md").read_text()
@@ -212,26 +213,25 @@ def test_task_overlays_choose_their_goal_variant():
 def test_a_tagged_config_round_trips_through_yaml_dump():
     from pydrake.common.yaml import yaml_dump_typed
 
-    from corn_drake.config import config_fields
+    from corn_drake.config.yaml_io import config_fields
 
-    cfg = load_env_config("push")
-    again = load_config_string(yaml_dump_typed(cfg), TeacherDiagramConfig)
+    cfg = load_teacher_config("push")
+    again = load_config(TeacherDiagramConfig, text=yaml_dump_typed(cfg))
     assert config_fields(again) == config_fields(cfg)
     assert again.task.goal == cfg.task.goal and type(again.task.goal) is PushFromHandGoal
 
 
 def test_a_bad_value_inside_a_tagged_goal_is_named():
     with pytest.raises(InputError, match=r"task\.goal\.distance = \['a', 'b'\]"):
-        load_config_string("task:\n  goal: !PlanarGoal {distance: [a, b]}\n", TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, text="task:\n  goal: !PlanarGoal {distance: [a, b]}\n")
     with pytest.raises(InputError, match=r"task\.goal\.heading_spread = 'wide'"):
-        load_config_string("task:\n  goal: !PushFromHandGoal {heading_spread: wide}\n",
-                           TeacherDiagramConfig)
+        load_config(TeacherDiagramConfig, text="task:\n  goal: !PushFromHandGoal {heading_spread: wide}\n")
 
 
 def test_set_changes_a_field_of_the_task_goal_variant_or_the_variant():
-    from corn_drake.config import TrainConfig
+    from corn_drake.config.training import TrainConfig
 
-    push = TrainConfig(env=load_env_config("push"))
+    push = TrainConfig(env=load_teacher_config("push"))
     wider = apply_sets(push, ["task.goal.distance=[0.05, 0.1]"])
     assert wider.env.task.goal == PushFromHandGoal(distance=[0.05, 0.1])  # still the push goal
     assert [str(c) for c in config_changes(push, wider)] == [

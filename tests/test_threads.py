@@ -5,7 +5,8 @@ import argparse
 import pytest
 import torch
 
-from corn_drake.nn.threads import auto_torch_threads, torch_threads, torch_threads_arg
+from corn_drake.arguments.torch_threads import torch_threads_arg
+from corn_drake.nn.threads import auto_torch_threads, torch_threads
 
 
 @pytest.mark.parametrize("cpus, expected", [(1, 1), (2, 1), (3, None), (16, None)])

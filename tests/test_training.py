@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config import TeacherDiagramConfig, TrainConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.training import TrainConfig
 from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import EnvFactory
 
@@ -63,7 +64,7 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_path):
     from corn_drake.errors import MissingInputError
     from corn_drake.rl.checkpoints import load_run_with_step, run_snapshots, snapshot_path
-    from corn_drake.run_config import write_run_config
+    from corn_drake.run_folders.config_file import write_run_config
 
     cfg = _small_cfg(160)  # 5 updates of 32 steps
     cfg.snapshot_every = 64  # passed at 64 and 128 (96 and 160 pass no new multiple)
@@ -138,7 +139,7 @@ def test_ray_workers_survive_a_killed_worker():
 
 
 def test_frozen_encoder_runs_once_per_observation_batch_and_never_in_the_update(tmp_path):
-    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.pretrained_encoders import make_encoder
     from corn_drake.rl.ppo import compute_gae
 
     cfg = TrainConfig(policy="corn", total_steps=8, envs_per_worker=2, rollout_steps=4)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from corn_drake.io_utils import save_npz
+from corn_drake.storage.atomic_files import save_npz
 
 
 @dataclasses.dataclass

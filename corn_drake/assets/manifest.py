@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.io_utils import read_json, write_json
+from corn_drake.storage.atomic_files import read_json, write_json
 
 WHAT = "object library manifest"
 SPLITS = ("train", "unseen")

@@ -13,7 +13,7 @@ from corn_drake.assets.decompose import DecompositionConfig, decompose, union_vo
 from corn_drake.assets.hulls import HullConfig, loadable_hull, obj_text
 from corn_drake.assets.ingest import Rejected
 from corn_drake.assets.stable_poses import DropConfig, find_stable_poses
-from corn_drake.io_utils import save_npy, write_text
+from corn_drake.storage.atomic_files import save_npy, write_text
 from corn_drake.scene.objects import ObjectSpec
 
 

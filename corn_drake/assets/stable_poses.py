@@ -25,7 +25,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from scipy.spatial import ConvexHull, Delaunay
 
-from corn_drake.config import SceneConfig
+from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.transforms import yaw_matrix

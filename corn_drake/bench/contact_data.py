@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from corn_drake.cli_types import positive_int
+from corn_drake.arguments.value_types import positive_int
 
 NAME = "contact-data"
 HELP = "contact-data generation speed (samples/s) vs the plain numpy path"
@@ -24,7 +24,7 @@ def add_arguments(parser):
 
 
 def _objects(path):
-    from corn_drake.contact.library_clouds import ObjectCloud, load_object_clouds
+    from corn_drake.assets.library_clouds import ObjectCloud, load_object_clouds
     from corn_drake.scene.objects import box_spec, cylinder_spec
 
     if path:

@@ -12,7 +12,7 @@ import json
 import subprocess
 import sys
 
-from corn_drake.cli_types import positive_int_list
+from corn_drake.arguments.value_types import positive_int_list
 
 NAME = "encoder"
 HELP = "CORN encoder vs 3-layer PointNet: forward latency and peak memory per batch size"
@@ -30,7 +30,7 @@ def _probe(kind: str, batch: int) -> dict:
 
 
 def run(args) -> dict:
-    from corn_drake.nn.encoder import CORNEncoder
+    from corn_drake.nn.corn_encoder import CORNEncoder
     from corn_drake.nn.pointnet import PointNetEncoder
 
     table = []

@@ -23,7 +23,7 @@ def _rss_mb() -> float:
 
 def main(kind: str, batch: int) -> dict:
     from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM
-    from corn_drake.nn.encoder import CORNEncoder
+    from corn_drake.nn.corn_encoder import CORNEncoder
     from corn_drake.nn.patchify import patch_indices
     from corn_drake.nn.pointnet import PointNetEncoder
 

@@ -14,7 +14,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from corn_drake.cli_types import positive_int
+from corn_drake.arguments.value_types import positive_int
 
 NAME = "perception"
 HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stage breakdown"
@@ -31,7 +31,7 @@ def add_arguments(parser):
 
 
 def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
-    from corn_drake.perception_harness import PerceptionHarness, slide_and_turn_poses
+    from corn_drake.builders.perception_harness import PerceptionHarness, slide_and_turn_poses
 
     harness = PerceptionHarness(cfg)
     spec = harness.scene.object_spec
@@ -64,7 +64,7 @@ def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
 
 
 def run(args) -> dict:
-    from corn_drake.diagrams_student import load_student_config
+    from corn_drake.config.diagram_files import load_student_config
 
     cfg = load_student_config(args.config)
     camera = cfg.cameras.camera

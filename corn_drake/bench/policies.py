@@ -18,9 +18,9 @@ import argparse
 import copy
 import dataclasses
 
-from corn_drake.cli_types import nonnegative_int, positive_int
-from corn_drake.nn.threads import add_torch_threads_argument
-from corn_drake.policy_kinds import POLICY_KINDS
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.torch_threads import add_torch_threads_argument
+from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 NAME = "policies"
 HELP = "training steps/s of each teacher policy (same run, same envs)"
@@ -61,11 +61,12 @@ def run(args) -> dict:
 
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.timed_training import check_counts, run_trainer, train_config
-    from corn_drake.config import TrainConfig
+    from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.run_config import apply_sets, load_env_config, on_library
+    from corn_drake.config.overrides import apply_sets, on_library
+    from corn_drake.config.diagram_files import load_teacher_config
 
-    env_cfg = load_env_config(args.task)
+    env_cfg = load_teacher_config(args.task)
     if args.objects:
         from corn_drake.rl.vec_env import library_train_ids
 

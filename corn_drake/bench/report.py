@@ -7,7 +7,7 @@ import platform
 import time
 from typing import Any
 
-from corn_drake.io_utils import write_json
+from corn_drake.storage.atomic_files import write_json
 
 
 def machine_info() -> dict[str, Any]:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 
 from corn_drake.bench.timed_training import COLLECT, PPO_UPDATE, add_trainer_arguments
-from corn_drake.cli_types import positive_int, positive_int_list
+from corn_drake.arguments.value_types import positive_int, positive_int_list
 
 NAME = "scale"
 HELP = "training steps/s with 1, 2, 4, ... Ray rollout workers, and the efficiency per worker"
@@ -146,10 +146,10 @@ def run(args) -> dict:
 
     from corn_drake.nn.threads import torch_threads, usable_cpus
     from corn_drake.rl.device import training_device
-    from corn_drake.run_config import load_env_config
+    from corn_drake.config.diagram_files import load_teacher_config
 
     device = training_device(args.device, "--device")  # before any env or Ray starts
-    env_cfg = load_env_config(args.task)
+    env_cfg = load_teacher_config(args.task)
     env_cfg.check()
     cpus = usable_cpus()
     counts = sorted(set(args.workers) | {1})  # 1 first: the baseline

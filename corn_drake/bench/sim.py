@@ -23,10 +23,10 @@ import time
 import numpy as np
 
 from corn_drake import DIAGRAMS_DIR
-from corn_drake.cli_types import nonnegative_int, positive_int
-from corn_drake.contract import ACTION_DIM
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.bench.episode_plans import random_action_plans, run_plans
 from corn_drake.errors import InputError
-from corn_drake.policy_kinds import POLICY_KINDS
+from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 PREVIOUS_PHYSICS = DIAGRAMS_DIR / "physics" / "previous_default.yaml"
 
@@ -53,17 +53,6 @@ def add_arguments(parser):
                              "settings before the throughput work")
 
 
-def _episodes(env, steps: int, seed: int):
-    """Episode plans [(seed, actions)] adding up to `steps` policy steps."""
-    rng = np.random.default_rng(seed)
-    plans, left = [], steps
-    while left > 0:
-        n = min(left, env.teacher_cfg.task.episode_steps)
-        plans.append((int(rng.integers(1 << 31)), rng.uniform(-1, 1, (n, ACTION_DIM))))
-        left -= n
-    return plans
-
-
 def _record(env, plans):
     """Untimed pass: per episode the DR sample, initial state and per-physics-step torques."""
     clock, h = env.clock, env.clock.time_step
@@ -86,17 +75,6 @@ def _record(env, plans):
         recorded.append((env.episode.physics, x0, np.array(torques),
                          env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()))
     return recorded
-
-
-def _run_env(env, plans):
-    t0 = time.perf_counter()
-    finals = []
-    for seed, actions in plans:
-        env.reset(seed=seed)
-        for action in actions:
-            env.step(action)  # termination is ignored: the plan fixes the step count
-        finals.append(env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy())
-    return time.perf_counter() - t0, finals
 
 
 def _run_bare(env, recorded):
@@ -150,14 +128,14 @@ def check_replayable(cfg) -> None:
 def bare_physics_rate(env, steps: int, seed: int) -> float:
     """Policy steps/s of the bare plant of `env`'s scene, replaying the torques of `steps`
     random-action policy steps recorded on `env` (untimed) from the same initial states."""
-    elapsed, _ = _run_bare(env, _record(env, _episodes(env, steps, seed)))
+    elapsed, _ = _run_bare(env, _record(env, random_action_plans(env, steps, seed)))
     return steps / elapsed
 
 
 def _profile_env(env, plans) -> list[str]:
     profiler = cProfile.Profile()
     profiler.enable()
-    _run_env(env, plans)
+    run_plans(env, plans)
     profiler.disable()
     stream = io.StringIO()
     pstats.Stats(profiler, stream=stream).sort_stats("tottime").print_stats(12)
@@ -181,7 +159,7 @@ def _policy_results(args, cfg) -> dict:
     import ray
 
     from corn_drake.rl.agent import TeacherAgent
-    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.pretrained_encoders import make_encoder
     from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
     from corn_drake.rl.vec_env import EnvBatch, EnvFactory
 
@@ -205,9 +183,10 @@ def baseline_physics_config(cfg, overlay):
     a missing or bad file is an InputError naming it."""
     import copy
 
-    from corn_drake.config import TeacherDiagramConfig, load_config
+    from corn_drake.config.teacher import TeacherDiagramConfig
+    from corn_drake.config.loader import load_config
 
-    base_cfg = load_config(overlay, TeacherDiagramConfig, defaults=copy.deepcopy(cfg))
+    base_cfg = load_config(TeacherDiagramConfig, overlay, defaults=copy.deepcopy(cfg))
     base_cfg.check()
     check_replayable(base_cfg)
     return base_cfg
@@ -220,7 +199,7 @@ def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -
     from corn_drake.rl.env import TeacherEnv
 
     baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
-    plans = _episodes(env, steps, seed)
+    plans = random_action_plans(env, steps, seed)
     recorded = {"configured": (env, _record(env, plans)),
                 "baseline": (baseline, _record(baseline, plans))}
     rates = {name: 0.0 for name in recorded}
@@ -252,15 +231,15 @@ def run(args) -> dict:
     env = TeacherEnv(args.config)
     check_replayable(env.cfg)
     base_cfg = baseline_physics_config(env.cfg, args.baseline_physics)  # its errors come first
-    _run_env(env, _episodes(env, 20, args.seed + 1))  # warm-up
-    plans = _episodes(env, args.steps, args.seed)
+    run_plans(env, random_action_plans(env, 20, args.seed + 1))  # warm-up
+    plans = random_action_plans(env, args.steps, args.seed)
     recorded = _record(env, plans)
     # Env and bare runs alternate and each keeps its fastest repeat: on these machines one run
     # swung +-30 % against the next with nothing else running, and a drift between two single
     # runs went straight into the ratio.
     env_time = bare_time = float("inf")
     for _ in range(args.repeats):
-        elapsed, env_finals = _run_env(env, plans)
+        elapsed, env_finals = run_plans(env, plans)
         env_time = min(env_time, elapsed)
         elapsed, bare_finals = _run_bare(env, recorded)
         bare_time = min(bare_time, elapsed)
@@ -282,7 +261,7 @@ def run(args) -> dict:
         # recording pass (determinism).
         "replay_max_position_error": replay_error,
         "determinism_max_state_error": determinism_error,
-        "profile_top_tottime": _profile_env(env, _episodes(env, min(args.steps, 200), args.seed + 2)),
+        "profile_top_tottime": _profile_env(env, random_action_plans(env, min(args.steps, 200), args.seed + 2)),
         "baseline_physics": str(args.baseline_physics),
         **physics_comparison(env, base_cfg, args.steps, args.seed, args.repeats),
     }

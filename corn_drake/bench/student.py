@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
 
 NAME = "student"
 HELP = ("student env steps/s with rendering and the full perception chain, vs the teacher env "
@@ -25,7 +25,7 @@ HELP = ("student env steps/s with rendering and the full perception chain, vs th
 
 
 def add_arguments(parser):
-    from corn_drake.config_student import SEGMENTATION_MODES
+    from corn_drake.config.student import SEGMENTATION_MODES
 
     parser.add_argument("--steps", type=positive_int, default=40,
                         help="policy steps per measurement (default 40: well under a minute here)")
@@ -52,7 +52,7 @@ def _run_policy_in_diagram(env, plans) -> float:
 def measure(cfg, steps: int, seed: int = 0, repeats: int = 2) -> dict:
     import torch
 
-    from corn_drake.bench.sim import _episodes, _run_env
+    from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.nn.student import StudentPolicy
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.student_env import StudentEnv
@@ -62,15 +62,15 @@ def measure(cfg, steps: int, seed: int = 0, repeats: int = 2) -> dict:
     teacher_env = TeacherEnv(cfg.teacher, spec=spec)
     torch.manual_seed(seed)
     policy_env = StudentEnv(cfg, spec=spec, student=StudentPolicy().eval())
-    plans = _episodes(student_env, steps, seed)
-    warm_up = _episodes(student_env, 2, seed + 1)  # renderer, first ICP, first inference
-    _run_env(student_env, warm_up)
-    _run_env(teacher_env, warm_up)
+    plans = random_action_plans(student_env, steps, seed)
+    warm_up = random_action_plans(student_env, 2, seed + 1)  # renderer, first ICP, first inference
+    run_plans(student_env, warm_up)
+    run_plans(teacher_env, warm_up)
     _run_policy_in_diagram(policy_env, warm_up)
     student_time = teacher_time = float("inf")
     for _ in range(repeats):
-        student_time = min(student_time, _run_env(student_env, plans)[0])
-        teacher_time = min(teacher_time, _run_env(teacher_env, plans)[0])
+        student_time = min(student_time, run_plans(student_env, plans)[0])
+        teacher_time = min(teacher_time, run_plans(teacher_env, plans)[0])
     policy_time = _run_policy_in_diagram(policy_env, plans)
     student_rate, teacher_rate = steps / student_time, steps / teacher_time
     camera = cfg.cameras.camera
@@ -93,7 +93,7 @@ def measure(cfg, steps: int, seed: int = 0, repeats: int = 2) -> dict:
 
 
 def run(args) -> dict:
-    from corn_drake.diagrams_student import load_student_config
+    from corn_drake.config.diagram_files import load_student_config
 
     cfg = load_student_config(args.config)
     cfg.segmentation.mode = args.perception

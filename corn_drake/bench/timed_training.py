@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from typing import Callable
 
-from corn_drake.cli_types import nonnegative_int, positive_int
-from corn_drake.nn.threads import add_torch_threads_argument
-from corn_drake.policy_kinds import POLICY_KINDS
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.torch_threads import add_torch_threads_argument
+from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 # The phases time_updates opens inside each window.
 COLLECT, PPO_UPDATE = "collect", "ppo_update"
@@ -41,7 +41,7 @@ def add_trainer_arguments(parser) -> None:
 
 def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str = "cpu"):
     """The TrainConfig of a benchmark run: warm-up plus timed updates of `args`, on `env_cfg`."""
-    from corn_drake.config import TrainConfig
+    from corn_drake.config.training import TrainConfig
 
     per_update = max(workers, 1) * envs_per_worker * args.rollout_steps
     return TrainConfig(policy=args.policy, workers=workers, envs_per_worker=envs_per_worker,
@@ -80,7 +80,7 @@ def run_trainer(cfg, timer, warmup_updates: int,
     `instrument(trainer)` adds a benchmark's own timers before training starts."""
     import tempfile
 
-    from corn_drake.rl.encoders import make_encoder
+    from corn_drake.rl.pretrained_encoders import make_encoder
     from corn_drake.rl.trainer import Trainer
 
     with tempfile.TemporaryDirectory(prefix="bench_trainer_") as out:

@@ -15,7 +15,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from corn_drake.cli_types import positive_float
+from corn_drake.arguments.value_types import positive_float
 from corn_drake.errors import InputError
 
 NAME = "tracking"
@@ -43,9 +43,9 @@ def add_arguments(parser):
 
 
 def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = True) -> dict:
-    from corn_drake.diagrams_student import load_student_config
-    from corn_drake.perception_harness import (PerceptionHarness, slide_and_turn_poses,
-                                               track_sequence)
+    from corn_drake.config.diagram_files import load_student_config
+    from corn_drake.builders.perception_harness import (PerceptionHarness, slide_and_turn_poses,
+                                                        track_sequence)
 
     cfg = load_student_config(config)
     table = {}

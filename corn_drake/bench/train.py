@@ -27,7 +27,7 @@ them; the timers below go on this run's instances (bench/phases.py):
 from __future__ import annotations
 
 from corn_drake.bench.timed_training import COLLECT, PPO_UPDATE, add_trainer_arguments
-from corn_drake.cli_types import positive_int
+from corn_drake.arguments.value_types import positive_int
 
 NAME = "train"
 HELP = "PPO training steps/s vs bare physics of the same scene, with where the time goes"
@@ -90,9 +90,9 @@ def run(args) -> dict:
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
     from corn_drake.nn.threads import torch_threads, usable_cpus
-    from corn_drake.run_config import load_env_config
+    from corn_drake.config.diagram_files import load_teacher_config
 
-    env_cfg = load_env_config(args.task)
+    env_cfg = load_teacher_config(args.task)
     env_cfg.check()
     check_replayable(env_cfg)
     per_update = args.envs * args.rollout_steps

@@ -36,7 +36,7 @@ def _episodes_key(report: dict) -> list[tuple]:
 def load_reports(paths: list[str]) -> list[dict]:
     """The reports, checked to hold the keys the table reads and the same episodes."""
     from corn_drake.errors import InputError
-    from corn_drake.io_utils import read_json
+    from corn_drake.storage.atomic_files import read_json
 
     reports = []
     for path in paths:
@@ -101,7 +101,7 @@ def markdown(rows: list[dict], hours: float | None) -> str:
 
 
 def run(args) -> int:
-    from corn_drake.io_utils import ensure_writable, read_json, write_text
+    from corn_drake.storage.atomic_files import ensure_writable, read_json, write_text
 
     if args.out:
         ensure_writable(Path(args.out).parent, "--out")

@@ -7,7 +7,7 @@ OUT/arguments.json; any difference is refused, naming the argument.
 
 from __future__ import annotations
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
 
 NAME = "contact-data"
 HELP = "generate gripper-contact samples from an object library (sharded, resumable)"
@@ -59,7 +59,7 @@ def manifest_arguments(out) -> dict | None:
 
 def run(args) -> int:
     from corn_drake.contact.runner import generate_dataset
-    from corn_drake.run_folder import lock_folder, resume_arguments
+    from corn_drake.run_folders.guards import lock_folder, resume_arguments
 
     with lock_folder(args.out):
         resume_arguments(args.out, output_arguments(args), legacy=manifest_arguments)

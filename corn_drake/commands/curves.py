@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.io_utils import read_json
+from corn_drake.storage.atomic_files import read_json
 
 NAME = "curves"
 HELP = "plot success rate and return of several training runs on one figure"
@@ -44,7 +44,7 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
     """(label, history rows) of one training run; a clear error when it has neither file."""
     checkpoint = run_dir / "checkpoints" / "last.pt"
     metrics = run_dir / "metrics.json"
-    from corn_drake.io_utils import load_checkpoint
+    from corn_drake.storage.checkpoint_files import load_checkpoint
 
     state = load_checkpoint(checkpoint, required=("history",))  # prev.pt if last.pt is unreadable
     if state is not None:
@@ -56,7 +56,7 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
             raise InputError(f"{metrics} has no 'history' list (written before curves were kept?)")
     else:
         raise MissingInputError(f"{run_dir}: no checkpoints/last.pt or metrics.json; is it a training run?")
-    from corn_drake.run_config import load_run_config, run_config_path
+    from corn_drake.run_folders.config_file import load_run_config, run_config_path
 
     label = run_dir.name
     if run_config_path(run_dir).is_file():
@@ -76,13 +76,13 @@ def benchmarked_rates(path: str) -> dict[str, float]:
 
 
 def run_policy(run_dir: Path) -> str | None:
-    from corn_drake.run_config import load_run_config, run_config_path
+    from corn_drake.run_folders.config_file import load_run_config, run_config_path
 
     return load_run_config(run_dir).policy if run_config_path(run_dir).is_file() else None
 
 
 def run(args) -> int:
-    from corn_drake.io_utils import ensure_writable, write_json
+    from corn_drake.storage.atomic_files import ensure_writable, write_json
     from corn_drake.viz.learning_curves import at_equal_time, plot_learning_curves, training_hours
 
     for path, argument in ((args.summary, "--summary"), (args.history, "--history")):

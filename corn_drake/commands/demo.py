@@ -14,15 +14,18 @@ and is skipped when its output is already complete, so a killed demo resumes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
 
 # The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
 TASK = "planar"
 # The shipped weights (models/weights/NAME) the demo evaluates after its own short training.
 SHIPPED_TEACHER = "push_corn"
+# The evaluation seed, `corn-drake evaluate`'s default.
+EVAL_SEED = 1000
 
 NAME = "demo"
 HELP = "run the pipeline end to end at a small default size; prints where each output went"
@@ -51,12 +54,11 @@ def run(args) -> int:
     from corn_drake.bench.report import write_report
     from corn_drake.bench.sim import add_arguments as add_bench_sim_arguments
     from corn_drake.bench.sim import run as bench_sim
-    from corn_drake.cli import main as cli
-    from corn_drake.config import PretrainConfig
-    from corn_drake.contact.pretrain import Pretrainer
+    from corn_drake.config.pretraining import PretrainConfig
+    from corn_drake.pretraining.contact import Pretrainer
     from corn_drake.contact.runner import generate_dataset
-    from corn_drake.diagrams import load_teacher_config
-    from corn_drake.evaluation import run_episode
+    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.evaluation.episodes import run_episode
     from corn_drake.package_data import data_dir
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.scripted import ScriptedPushAgent
@@ -92,10 +94,7 @@ def run(args) -> int:
     _stage("4/6 teacher PPO (corn)", outputs, t0)
     run_dir = out / "teacher_corn"
     # The demo's pretraining is a few hundred steps: its encoder is below the F1 bar by design.
-    cli(["train", "--policy", "corn", "--task", TASK, "--objects", str(library.resolve()),
-         "--encoder", str(pre / "encoder.pt"), "--allow-weak-encoder",
-         "--steps", str(args.train_steps), "--envs-per-worker", "8", "--rollout-steps", "32",
-         "--seed", str(args.seed), "--out", str(run_dir), "--no-progress"])
+    train_teacher(run_dir, library.resolve(), pre / "encoder.pt", args)
     outputs["teacher run (TensorBoard in tb/)"] = run_dir
     outputs["run config (what evaluate reads)"] = run_dir / "config.yaml"
     outputs["learning curve"] = run_dir / "plots" / "learning_curve.png"
@@ -103,17 +102,14 @@ def run(args) -> int:
     _stage("5/6 evaluation on unseen objects", outputs, t0)
     report = out / "eval_corn.json"
     # On the run's own task and action step, read from its config.yaml.
-    cli(["evaluate", "--run", str(run_dir), "--objects", str(library), "--split", "unseen",
-         "--episodes", str(args.eval_episodes), "--record", "1", "--report", str(report)])
+    evaluate_on_unseen(run_dir, library, args.eval_episodes, report)
     outputs["evaluation report"] = report
     outputs["evaluation recording (Meshcat HTML)"] = out / "eval_corn_recordings"
     # The shipped teacher on the demo library's unseen objects: held-out families, the same
     # shapes as its card's (stable poses from the demo's fewer drops), on its own push task.
     shipped = data_dir("models") / "weights" / SHIPPED_TEACHER
     shipped_report = out / "eval_shipped_corn.json"
-    cli(["evaluate", "--run", str(shipped), "--objects", str(library), "--split", "unseen",
-         "--episodes", str(args.eval_episodes), "--record", "1", "--attention",
-         "--report", str(shipped_report)])
+    evaluate_on_unseen(shipped, library, args.eval_episodes, shipped_report, attention=True)
     outputs["shipped teacher's evaluation (card: models/weights/push_corn/card.json)"] = shipped_report
     outputs["its recording, attention coloured (Meshcat HTML)"] = out / "eval_shipped_corn_recordings"
 
@@ -136,3 +132,49 @@ def run(args) -> int:
     for what, path in outputs.items():
         print(f"  {what}: {path}")
     return 0
+
+
+def train_teacher(run_dir: Path, library: Path, encoder: Path, args) -> None:
+    """The demo's `corn` teacher: PPO on the planar task over the library's train objects, the
+    same flow as `corn-drake train` (a killed demo resumes the run; one with other demo
+    arguments is refused, naming what differs)."""
+    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.config.overrides import on_library
+    from corn_drake.config.training import TrainConfig
+    from corn_drake.rl.pretrained_encoders import load_encoder
+    from corn_drake.rl.trainer import Trainer
+    from corn_drake.run_folders.resumable import ResumableRun
+
+    cfg = on_library(TrainConfig(env=load_teacher_config(TASK)), str(library))
+    cfg = dataclasses.replace(cfg, policy="corn", encoder=str(encoder), allow_weak_encoder=True,
+                              total_steps=args.train_steps, envs_per_worker=8, rollout_steps=32,
+                              seed=args.seed)
+    cfg.check()
+    with ResumableRun.open(run_dir, TrainConfig) as run_folder:
+        run_folder.refuse_changes(cfg, may_grow=("total_steps",), may_change=(),
+                                  name=lambda field: f"demo setting {field}")
+        trainer = Trainer(cfg, run_dir, load_encoder(cfg.policy, cfg.encoder, True))
+        run_folder.write_config(cfg, f"task {TASK}, policy corn, {cfg.total_steps} steps")
+        trainer.train(progress=False)
+
+
+def evaluate_on_unseen(run: Path, library: Path, episodes: int, report_path: Path,
+                       attention: bool = False) -> None:
+    """A teacher run evaluated as `corn-drake evaluate --split unseen --record 1` does: on its
+    own task, round-robin over the library's unseen objects, the first episode recorded to
+    Meshcat HTML beside the report."""
+    from corn_drake.assets.library import list_objects, load_object_spec
+    from corn_drake.evaluation.episodes import evaluate
+    from corn_drake.rl.checkpoints import load_run_with_step
+    from corn_drake.storage.atomic_files import write_json
+
+    cfg, agent, env_steps = load_run_with_step(run)
+    objects = [(i, load_object_spec(library, i)) for i in list_objects(library, "unseen")]
+    out_dir = report_path.parent / f"{report_path.stem}_recordings"
+    report = evaluate(agent, cfg.env, objects, episodes, 1, EVAL_SEED, out_dir,
+                      attention=attention)
+    report.update({"env_steps": env_steps, "checkpoint": "last.pt", "run": str(run),
+                   "policy": cfg.policy, "overrides": [], "split": "unseen", "actions": "mean"})
+    write_json(report_path, report)
+    print(f"[demo] {run.name}: success {report['success_rate']:.2f} over {episodes} episodes; "
+          f"report {report_path}")

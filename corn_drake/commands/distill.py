@@ -5,31 +5,32 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-from corn_drake.cli_types import finite_float, nonnegative_int, positive_float, positive_int
+from corn_drake.arguments.run_flags import (RESUME_MAY_CHANGE, RUN_SHORTCUTS, add_run_arguments,
+                                            flag_of_field)
+from corn_drake.arguments.value_types import (finite_float, nonnegative_int, positive_float,
+                                               positive_int)
 
 NAME = "distill"
 HELP = "distil a trained teacher into the student with DAgger (resumes from OUT/checkpoints/last.pt)"
 
-# Flags that set one DistillConfig field: argparse dest -> field. They default to None: a new
-# run takes the field's default, a resumed run its recorded value.
-SHORTCUTS = {"steps": "total_steps", "workers": "workers", "envs_per_worker": "envs_per_worker",
-             "seed": "seed", "encoder": "encoder", "allow_weak_encoder": "allow_weak_encoder",
-             "window": "window", "beta_start": "beta_start",
+# Flags that set one DistillConfig field: argparse dest -> field (the run settings' shared flags,
+# then distill's own). They default to None: a new run takes the field's default, a resumed
+# run its recorded value.
+SHORTCUTS = {**RUN_SHORTCUTS, "window": "window", "beta_start": "beta_start",
              "beta_anneal_steps": "beta_anneal_steps", "student_action": "student_action",
-             "lr": "lr", "device": "device", "ray_address": "ray_address",
-             "checkpoint_every": "checkpoint_every", "log_every": "log_every"}
+             "lr": "lr", "checkpoint_every": "checkpoint_every", "log_every": "log_every"}
 # On resume total_steps may grow; where the workers and tensors live, and how often the run
 # checkpoints and logs, do not change what it learns.
 RESUME_MAY_GROW = ("total_steps",)
-RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every", "log_every")
+RESUME_MAY_CHANGE = (*RESUME_MAY_CHANGE, "log_every")
 
 
 def add_arguments(parser):
-    from corn_drake.config_distill import STUDENT_ACTIONS
-    from corn_drake.config_student import SEGMENTATION_MODES
+    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.config.training import STUDENT_ACTIONS
 
-    parser.add_argument("--out", required=True,
-                        help="run folder, e.g. runs/S; an existing run resumes from its config.yaml")
+    add_run_arguments(parser, NAME, encoder_help="contact-pretrained CORN encoder for the "
+                                                 "student (default: the teacher run's encoder)")
     parser.add_argument("--teacher", default=None,
                         help="the teacher's run folder (written by `corn-drake train`); "
                              "required for a new run")
@@ -41,17 +42,6 @@ def add_arguments(parser):
                              "(default: the teacher run's objects)")
     parser.add_argument("--perception", choices=SEGMENTATION_MODES, default=None,
                         help="segmentation during training (default: the config's, geometric)")
-    parser.add_argument("--encoder", default=None,
-                        help="contact-pretrained CORN encoder for the student (default: the "
-                             "teacher run's encoder)")
-    parser.add_argument("--allow-weak-encoder", action="store_true", default=None,
-                        help="accept an encoder whose pretraining contact F1 is below 0.8 (or "
-                             "unrecorded), with a warning")
-    parser.add_argument("--steps", type=positive_int, default=None,
-                        help="total environment steps (default: 20000)")
-    parser.add_argument("--workers", type=nonnegative_int, default=None,
-                        help="Ray rollout workers (default 0: in-process)")
-    parser.add_argument("--envs-per-worker", type=positive_int, default=None, help="default: 4")
     parser.add_argument("--window", type=positive_int, default=None,
                         help="BPTT window in steps, one optimiser step each (default: 8)")
     parser.add_argument("--beta-start", type=finite_float, default=None,
@@ -65,11 +55,6 @@ def add_arguments(parser):
                         help="windows between checkpoints (default: 50)")
     parser.add_argument("--log-every", type=positive_int, default=None,
                         help="windows per metrics row and TensorBoard point (default: 10)")
-    parser.add_argument("--seed", type=nonnegative_int, default=None, help="default: 0")
-    parser.add_argument("--device", default=None, help="torch device of the learner (default cpu)")
-    parser.add_argument("--ray-address", default=None,
-                        help="connect to a Ray cluster instead of a local one")
-    parser.add_argument("--no-progress", action="store_true")
 
 
 def load_teacher(run: str):
@@ -89,8 +74,8 @@ def load_teacher(run: str):
 def student_env_config(teacher_env, layer: str | None):
     """The student diagram for a teacher trained on `teacher_env`: its scene, task and
     randomisation as the base, the student layer (`--config`) read on top."""
-    from corn_drake.config_student import StudentDiagramConfig
-    from corn_drake.diagrams_student import load_student_config
+    from corn_drake.config.student import StudentDiagramConfig
+    from corn_drake.config.diagram_files import load_student_config
 
     return load_student_config(layer, base=StudentDiagramConfig(teacher=copy.deepcopy(teacher_env)))
 
@@ -98,7 +83,7 @@ def student_env_config(teacher_env, layer: str | None):
 def requested_config(args, recorded, teacher_cfg):
     """The DistillConfig `args` ask for, on top of the `recorded` one of a resumed run (None: a
     new run)."""
-    from corn_drake.config_distill import DistillConfig
+    from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
 
     if recorded is None:
@@ -131,55 +116,45 @@ def requested_config(args, recorded, teacher_cfg):
 
 
 def run(args) -> int:
-    from corn_drake.config import load_config
-    from corn_drake.config_distill import DistillConfig
+    from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
     from corn_drake.nn.student_io import student_from_encoder
     from corn_drake.rl.dagger import DaggerTrainer
-    from corn_drake.rl.encoders import check_pretrained
-    from corn_drake.run_config import config_changes, run_config_path, write_run_config
-    from corn_drake.run_folder import lock_folder, refuse_config_changes
+    from corn_drake.rl.pretrained_encoders import check_pretrained
+    from corn_drake.run_folders.config_file import run_config_path
+    from corn_drake.run_folders.resumable import ResumableRun
 
-    out = Path(args.out)
-    if not run_config_path(out).is_file() and args.teacher is None:
+    if not run_config_path(args.out).is_file() and args.teacher is None:
         raise InputError("--teacher is required for a new run (the teacher's run folder)")
-    with lock_folder(out):
-        # Everything that can refuse comes before the first write.
-        recorded = (load_config(run_config_path(out), DistillConfig)
-                    if run_config_path(out).is_file() else None)
+    with ResumableRun.open(args.out, DistillConfig, resume_required=args.resume) as run_folder:
+        recorded = run_folder.recorded
         teacher_cfg, teacher = load_teacher(args.teacher or recorded.teacher)
         cfg = requested_config(args, recorded, teacher_cfg)
         if cfg.env.teacher.scene.object.cycles_library:
             from corn_drake.rl.vec_env import library_train_ids
 
             library_train_ids(cfg.env.teacher.scene.object.library)  # a bad library fails here
-        if recorded is not None:
-            refuse_config_changes(out, recorded, cfg, may_grow=RESUME_MAY_GROW,
-                                  ignore=RESUME_MAY_CHANGE, name=argument_of_field)
+        run_folder.refuse_changes(cfg, may_grow=RESUME_MAY_GROW, may_change=RESUME_MAY_CHANGE,
+                                  name=argument_of_field)
         import torch
 
         torch.manual_seed(cfg.seed)  # the student's fresh layers: a run is its seed's
         student = student_from_encoder(cfg.encoder, cfg.frozen)
         check_pretrained(student.encoder, cfg.encoder, cfg.allow_weak_encoder)
-        trainer = DaggerTrainer(cfg, out, student, teacher)  # reads the checkpoint, writes nothing
-        write_run_config(cfg, out)
-        if recorded is None:
-            print(f"new student run {out}: teacher {cfg.teacher} ({teacher_cfg.policy}), "
-                  f"perception {cfg.env.segmentation.mode}, {cfg.total_steps} steps")
-        else:
-            changes = config_changes(recorded, cfg)
-            print(f"resume {out} at step {trainer.global_step}: "
-                  + ("; ".join(map(str, changes)) or "as recorded"))
+        trainer = DaggerTrainer(cfg, run_folder.out, student, teacher)  # reads, writes nothing
+        run_folder.write_config(cfg, f"teacher {cfg.teacher} ({teacher_cfg.policy}), perception "
+                                     f"{cfg.env.segmentation.mode}, {cfg.total_steps} steps",
+                                kind="student run", at_step=trainer.global_step)
         metrics = trainer.train(progress=not args.no_progress)
-    print(f"distilled {metrics['global_step']} steps; run folder {out}")
+    print(f"distilled {metrics['global_step']} steps; run folder {run_folder.out}")
     return 0
 
 
 def argument_of_field(field: str) -> str:
     """The distill argument behind a DistillConfig field, for refusal messages."""
-    for dest, name in SHORTCUTS.items():
-        if name == field:
-            return "--" + dest.replace("_", "-")
+    flag = flag_of_field(field, SHORTCUTS)
+    if flag is not None:
+        return flag
     if field == "teacher":
         return "--teacher"
     if field.startswith("env.teacher.scene.object."):

@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
 from corn_drake.errors import InputError
 
 NAME = "evaluate"
@@ -36,8 +36,8 @@ REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
-    from corn_drake.config_student import SEGMENTATION_MODES
-    from corn_drake.nn.threads import add_torch_threads_argument
+    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
     parser.add_argument("--run", required=True,
                         help="run folder written by `corn-drake train` (teacher) or `corn-drake "
@@ -76,38 +76,6 @@ def add_arguments(parser):
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
-def run_kind(run: str) -> str:
-    """"train" or "distill": which command wrote the run folder `run`, told by the top-level
-    keys of its config.yaml; a missing config or one of neither kind is an error naming --run."""
-    import yaml
-
-    from corn_drake.config import TrainConfig, field_types, read_tagged_yaml
-    from corn_drake.config_distill import DistillConfig
-    from corn_drake.errors import MissingInputError
-    from corn_drake.run_config import run_config_path
-
-    path = run_config_path(run)
-    if not path.is_file():
-        raise MissingInputError(f"--run {run}: {path} not found: expected a run folder written "
-                                "by `corn-drake train` or `corn-drake distill`, or a reference "
-                                f"({', '.join(REFERENCES)})")
-    try:
-        data = read_tagged_yaml(path.read_text())
-    except (UnicodeDecodeError, yaml.YAMLError) as e:  # neither kind of run
-        raise InputError(f"--run {run}: {path} is not a YAML run config "
-                         f"({' '.join(str(e).split())[:200]})") from None
-    keys = set(data) if isinstance(data, dict) else set()
-    # The top-level fields only one of the two configs has (both have env, seed, ...).
-    train_fields, distill_fields = set(field_types(TrainConfig)), set(field_types(DistillConfig))
-    train_only, distill_only = train_fields - distill_fields, distill_fields - train_fields
-    if keys & distill_only and not keys & train_only:
-        return "distill"
-    if keys & train_only and not keys & distill_only:
-        return "train"
-    raise InputError(f"--run {run}: {path} is neither a `corn-drake train` (teacher) nor a "
-                     "`corn-drake distill` (student) run config")
-
-
 def _whole_library(obj) -> str:
     """The library of an object config that names all its train objects (library_objects:
     train), as `train --objects` records it; "" for a single object."""
@@ -118,7 +86,7 @@ def _object_specs(args, cfg):
     # --objects, else the run's library when it was trained on a whole one: its --split objects.
     library = args.objects or _whole_library(cfg.scene.object)
     if not library:
-        from corn_drake.diagrams import object_spec_from_config
+        from corn_drake.builders.teacher import object_spec_from_config
 
         return [(cfg.scene.object.object_id or cfg.scene.object.kind,
                  object_spec_from_config(cfg.scene.object, cfg.seed))]
@@ -131,14 +99,15 @@ def _object_specs(args, cfg):
 
 
 def run(args) -> int:
-    from corn_drake.config import TrainConfig
+    from corn_drake.config.training import TrainConfig
     from corn_drake.errors import InputError
-    from corn_drake.evaluation import evaluate, success_by_group
-    from corn_drake.io_utils import ensure_writable, write_json
+    from corn_drake.evaluation.episodes import evaluate, success_by_group
+    from corn_drake.storage.atomic_files import ensure_writable, write_json
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.checkpoints import load_run_with_step
-    from corn_drake.run_config import (apply_sets, config_changes, load_env_config,
-                                       replace_task)
+    from corn_drake.config.overrides import apply_sets, config_changes
+    from corn_drake.config.diagram_files import load_teacher_config, replace_task
+    from corn_drake.run_folders.config_file import run_kind
 
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
@@ -148,7 +117,8 @@ def run(args) -> int:
     ensure_writable(report_path.parent, "--report")
     if args.record > 0:
         ensure_writable(out_dir, "--record")
-    kind = "reference" if args.run in REFERENCES else run_kind(args.run)
+    kind = "reference" if args.run in REFERENCES else run_kind(
+        args.run, or_else=f"a reference ({', '.join(REFERENCES)})")
     if args.checkpoint and kind != "train":
         raise InputError(f"--checkpoint {args.checkpoint} picks one of a teacher run's kept "
                          f"checkpoints; --run {args.run} is not a `corn-drake train` run")
@@ -168,7 +138,7 @@ def run(args) -> int:
         from corn_drake.rl import scripted
 
         # A reference has no run: --task chooses its task, --set changes that task.
-        base = TrainConfig(env=load_env_config(args.task))
+        base = TrainConfig(env=load_teacher_config(args.task))
         run_cfg = apply_sets(base, args.set, only="env")
         agent = getattr(scripted, REFERENCES[args.run])(run_cfg.env.controller)
         policy = args.run

@@ -43,10 +43,11 @@ def run(args) -> int:
 
     from corn_drake.assets.library import list_objects, load_object_spec
     from corn_drake.errors import InputError
-    from corn_drake.evaluation import episode_seed
-    from corn_drake.io_utils import ensure_writable, write_json
+    from corn_drake.evaluation.episodes import episode_seed
+    from corn_drake.storage.atomic_files import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
-    from corn_drake.viz.gallery import episode_stills, save_png
+    from corn_drake.evaluation.stills import episode_stills
+    from corn_drake.viz.gallery import save_png
 
     out = Path(args.out)
     cfg, agent = load_run(args.run)

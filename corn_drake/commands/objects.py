@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from corn_drake.cli_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int
 
 if TYPE_CHECKING:
     from corn_drake.assets.manifest import LibraryObject
@@ -80,7 +80,7 @@ def run(args) -> int:
     from corn_drake.assets.library import build_procedural, ingest_folder
     from corn_drake.assets.process import ProcessConfig
     from corn_drake.errors import InputError
-    from corn_drake.run_folder import lock_folder, resume_arguments
+    from corn_drake.run_folders.guards import lock_folder, resume_arguments
 
     if args.split is not None and args.source != "procedural":  # before OUT is touched
         raise InputError(f"--split {args.split} builds part of a procedural library; "

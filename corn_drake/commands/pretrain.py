@@ -23,7 +23,7 @@ import os
 import shutil
 from pathlib import Path
 
-from corn_drake.cli_types import nonnegative_int, positive_float, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_float, positive_int
 
 NAME = "pretrain"
 HELP = ("pretrain the patch encoder on gripper contact, or on a pretext task (p2v-lite, rot) "
@@ -61,7 +61,7 @@ def add_arguments(parser):
 def run(args) -> int:
     from corn_drake.contact.shards import list_shards
     from corn_drake.errors import InputError
-    from corn_drake.run_folder import lock_folder, resume_arguments
+    from corn_drake.run_folders.guards import lock_folder, resume_arguments
 
     if args.model in PRETEXT_MODELS:
         return _pretrain_pretext(args, Path(args.out))
@@ -81,10 +81,10 @@ def run(args) -> int:
 
 
 def _pretrain(args, out: Path) -> int:
-    from corn_drake.config import PretrainConfig
-    from corn_drake.contact.pretrain import Pretrainer
-    from corn_drake.io_utils import read_json, write_json, write_text
-    from corn_drake.run_folder import refuse_changed_config
+    from corn_drake.config.pretraining import PretrainConfig
+    from corn_drake.pretraining.contact import Pretrainer
+    from corn_drake.storage.atomic_files import read_json, write_json, write_text
+    from corn_drake.run_folders.guards import refuse_changed_config
     from pydrake.common.yaml import yaml_dump_typed
 
     models = ["corn", "pointnet"] if args.model == "both" else [args.model]
@@ -95,15 +95,15 @@ def _pretrain(args, out: Path) -> int:
             steps = args.pointnet_steps
             budget = {"kind": "steps_given"}
         elif model == "pointnet" and args.pointnet_budget == "time" and "corn" in results:
-            from corn_drake.contact.pretrain import seconds_per_step
+            from corn_drake.pretraining.contact import seconds_per_step
 
             previous = out / "pointnet_equal_time" / "config.yaml"
             per_step = seconds_per_step("pointnet", args.batch_size)
             steps = max(1, round(results["corn"]["train_seconds"] / per_step))
             if previous.exists():  # resuming: keep the step count the run started with
-                from corn_drake.config import load_config
+                from corn_drake.config.loader import load_config
 
-                steps = load_config(previous, PretrainConfig).steps
+                steps = load_config(PretrainConfig, previous).steps
             budget = {"kind": "equal_wall_clock", "corn_train_seconds": results["corn"]["train_seconds"],
                       "pointnet_seconds_per_step": per_step}
             print(f"pointnet: {steps} steps = CORN's {results['corn']['train_seconds']:.0f} s "
@@ -140,12 +140,12 @@ def _pretrain(args, out: Path) -> int:
 
 
 def _pretrain_pretext(args, out: Path) -> int:
-    from corn_drake.config_pretext import PretextConfig, pretext_config
-    from corn_drake.contact.library_clouds import load_object_clouds
+    from corn_drake.config.pretraining import PretextConfig, pretext_config
+    from corn_drake.assets.library_clouds import load_object_clouds
     from corn_drake.errors import InputError
-    from corn_drake.io_utils import write_text
-    from corn_drake.pretext.pretrain import PretextPretrainer
-    from corn_drake.run_folder import lock_folder, refuse_changed_config, resume_arguments
+    from corn_drake.storage.atomic_files import write_text
+    from corn_drake.pretraining.pretext import PretextPretrainer
+    from corn_drake.run_folders.guards import lock_folder, refuse_changed_config, resume_arguments
     from pydrake.common.yaml import yaml_dump_typed
 
     if args.data is not None:

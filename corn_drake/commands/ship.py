@@ -90,9 +90,9 @@ def _check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
 
 
 def run(args) -> int:
-    from corn_drake.commands.evaluate import run_kind
+    from corn_drake.run_folders.config_file import run_kind
     from corn_drake.errors import InputError
-    from corn_drake.io_utils import read_json, write_json
+    from corn_drake.storage.atomic_files import read_json, write_json
 
     run_dir, out = Path(args.run), Path(args.out)
     if out.resolve() == run_dir.resolve():
@@ -130,7 +130,7 @@ def run(args) -> int:
 
 def _weights(run_dir: Path, key: str) -> dict:
     from corn_drake.errors import MissingInputError
-    from corn_drake.io_utils import load_checkpoint
+    from corn_drake.storage.checkpoint_files import load_checkpoint
 
     state = load_checkpoint(run_dir / "checkpoints" / "last.pt", required=(key, "global_step"))
     if state is None:
@@ -152,7 +152,7 @@ def _save_weights(out: Path, state: dict) -> None:
 
     import torch
 
-    from corn_drake.io_utils import atomic_path
+    from corn_drake.storage.atomic_files import atomic_path
 
     buffer = io.BytesIO()
     torch.save(state, buffer)
@@ -164,9 +164,9 @@ def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a teacher run's config, weights and encoder into `out`; its card fields."""
     import shutil
 
-    from corn_drake.io_utils import atomic_path
+    from corn_drake.storage.atomic_files import atomic_path
     from corn_drake.rl.checkpoints import load_run
-    from corn_drake.run_config import write_run_config
+    from corn_drake.run_folders.config_file import write_run_config
 
     cfg, agent = load_run(run_dir)  # the run must load as evaluate would load it
     state = _weights(run_dir, "agent")
@@ -194,7 +194,7 @@ def _ship_student(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a student run's config and weights into `out`; its card fields. The student's
     weights hold its encoder, so no encoder file travels."""
     from corn_drake.rl.checkpoints import load_student_run
-    from corn_drake.run_config import write_run_config
+    from corn_drake.run_folders.config_file import write_run_config
 
     cfg, _ = load_student_run(run_dir)  # the run must load as evaluate would load it
     state = _weights(run_dir, "student")
@@ -216,6 +216,6 @@ def _ship_student(run_dir: Path, out: Path, library: str) -> dict:
 def _pretraining_record(encoder: str):
     """The contact-pretraining record of the encoder file a student started from (None when that
     file is not on this machine: the student's weights do not carry it)."""
-    from corn_drake.nn.encoder_io import load_frozen_encoder
+    from corn_drake.nn.encoder_files import load_frozen_encoder
 
     return load_frozen_encoder(encoder).pretraining if encoder and Path(encoder).is_file() else None

@@ -15,13 +15,12 @@ so a killed run resumes by skipping finished shards and the same seed gives the 
 from __future__ import annotations
 
 import dataclasses
-import zlib
 
 import numpy as np
 import torch
 
 from corn_drake.contact.gripper_sdf import GripperSDF
-from corn_drake.contact.library_clouds import ObjectCloud
+from corn_drake.assets.library_clouds import ObjectCloud
 from corn_drake.transforms import quat_wxyz_to_matrix
 
 SPLIT_CODES = {"train": 0, "val": 1, "unseen": 2}

@@ -9,7 +9,7 @@ import numpy as np
 
 from corn_drake.contact.generate import ContactDataConfig, generate_samples, shard_rng
 from corn_drake.contact.gripper_sdf import GripperSDF
-from corn_drake.contact.library_clouds import load_object_clouds
+from corn_drake.assets.library_clouds import load_object_clouds
 from corn_drake.contact.shards import read_shard, shard_is_complete, shard_path, write_manifest, write_shard
 from corn_drake.errors import InputError
 

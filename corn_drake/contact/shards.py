@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.io_utils import read_json, save_npz, write_json
+from corn_drake.storage.atomic_files import read_json, save_npz, write_json
 
 KEYS = {"points": 3, "labels": 2, "hand_pose": 2, "object_pose": 2, "object_id": 1, "scale": 1}
 

@@ -1,7 +1,7 @@
 """The encoders' input normalisation, (x - center) / scale on points and on the hand position.
 
 An encoder only works on inputs normalised as it was pretrained, so the normalisation travels
-with it: encoder.pt records it (nn/encoder_io.py), and as a module with buffers it is part of
+with it: encoder.pt records it (nn/encoder_files.py), and as a module with buffers it is part of
 every policy checkpoint that holds the encoder. The default values are the contract's
 ENCODER_INPUT_CENTER / ENCODER_INPUT_SCALE.
 """

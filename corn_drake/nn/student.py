@@ -36,8 +36,8 @@ from torch import nn
 
 from corn_drake.contract import (ACTION_DIM, CONTEXT_KEYS, POSITION_DIM, STUDENT_OBS_KEYS,
                                  observation_size)
-from corn_drake.nn.encoder import CORNEncoder
-from corn_drake.nn.encoder_io import NormalizedEncoder, make_policy_encoder
+from corn_drake.nn.corn_encoder import CORNEncoder
+from corn_drake.nn.encoder_files import NormalizedEncoder, make_policy_encoder
 from corn_drake.nn.policy import mlp
 
 # The cloud becomes patch tokens and the hand state the pretrained hand token; every other

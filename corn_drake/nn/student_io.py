@@ -7,7 +7,7 @@ the transformer meets new tokens (goal, joints, previous action) and partial clo
 pretrained on, so it has to adapt; `frozen` keeps named groups (e.g. "patch_tokenizer") at their
 pretrained values instead.
 
-The pretraining-quality bar (rl/encoders.check_pretrained on student.encoder, which keeps the
+The pretraining-quality bar (rl/pretrained_encoders.check_pretrained on student.encoder, which keeps the
 pretraining record; contact F1 >= 0.8) is the caller's: nn/ does not import rl/, and the
 distillation command holds the --allow-weak-encoder flag.
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import load_frozen_encoder
+from corn_drake.nn.encoder_files import load_frozen_encoder
 from corn_drake.nn.student import PARAMETER_GROUPS, StudentPolicy
 
 

@@ -1,5 +1,6 @@
-"""torch's intra-op thread count: the `--torch-threads` argument of the commands, and a block of
-code run at a given count with the caller's count given back after.
+"""torch's intra-op thread count: what `--torch-threads auto` resolves to, and a block of code run
+at a given count with the caller's count given back after (the argument itself:
+arguments/torch_threads.py).
 
 Measured on a project machine (2 vCPUs giving one core of throughput), docs/results/README.md:
 - training, quiet: torch's 2 threads beat 1 by 5 % for `corn` and 20-50 % for `e2e` and `pn`,
@@ -13,11 +14,9 @@ else will run beside them), and `evaluate` takes one thread on such a machine ("
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import os
 
-from corn_drake.cli_types import positive_int
 
 # "auto" resolves to one thread where the process may use at most this many CPUs.
 SMALL_MACHINE_CPUS = 2
@@ -35,35 +34,12 @@ def auto_torch_threads(cpus: int | None = None) -> int | None:
     return 1 if cpus <= SMALL_MACHINE_CPUS else None
 
 
-def torch_threads_arg(text: str) -> int | None:
-    """argparse type of --torch-threads: 'torch' (torch's own count: None), 'auto'
-    (auto_torch_threads) or an integer >= 1."""
-    if text == "torch":
-        return None
-    if text == "auto":
-        return auto_torch_threads()
-    try:
-        return positive_int(text)
-    except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(
-            f"expected 'torch', 'auto' or an integer >= 1, got {text!r}") from None
-
-
-def add_torch_threads_argument(parser, what: str, default: str = "torch") -> None:
-    """--torch-threads for a command that runs `what`."""
-    parser.add_argument("--torch-threads", type=torch_threads_arg, default=default,
-                        help=f"torch intra-op threads for {what}: torch (torch's own count), "
-                             f"auto (1 on a machine with <= {SMALL_MACHINE_CPUS} usable CPUs, "
-                             f"torch's own on a larger one) or a count (default: {default}; "
-                             "nn/threads.py gives the measurements)")
-
-
 @contextlib.contextmanager
 def torch_threads(count: int | None):
     """torch.set_num_threads(count) inside (None: torch's own choice), the caller's count back
     after: the setting is process-wide, and a caller in the same process (a notebook, the
     tests) keeps its own."""
-    import torch  # here, not at the top: the argparse helpers above are read by every command
+    import torch  # here, not at the top: arguments/torch_threads.py imports this module for every command
 
     before = torch.get_num_threads()
     if count is not None:

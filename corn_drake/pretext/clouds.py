@@ -2,7 +2,7 @@
 
 The paper pretrained P2V-lite on ShapeNet (point2vec's data; its `p2v` row used point2vec's own
 ShapeNet weights) and ROT on ShapeNet too. No dataset can be downloaded here, so both use the
-object library's clouds (contact/library_clouds.py, the same reader contact data uses) placed
+object library's clouds (assets/library_clouds.py, the same reader contact data uses) placed
 as contact data places them (contact/generate.ContactDataConfig): each cloud is an object scaled
 to radius U(0.04, 0.12) m, turned by a uniform rotation and centred uniformly in x +-0.24,
 y +-0.30, z [0.35, 0.65], then 512 of its surface samples with N(0, 4 mm) noise. The clouds are
@@ -26,7 +26,7 @@ from pathlib import Path
 import torch
 
 from corn_drake.contact.generate import ContactDataConfig
-from corn_drake.contact.library_clouds import load_object_clouds
+from corn_drake.assets.library_clouds import load_object_clouds
 from corn_drake.contract import DEFAULT_NUM_POINTS
 from corn_drake.errors import InputError
 from corn_drake.nn.geometry import random_rotations, rot6d

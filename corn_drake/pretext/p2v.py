@@ -31,7 +31,7 @@ import copy
 import torch
 from torch import nn
 
-from corn_drake.nn.encoder import CORNEncoder
+from corn_drake.nn.corn_encoder import CORNEncoder
 from corn_drake.nn.patchify import patch_indices
 
 # Parts of the encoder the teacher shares with the student (input embeddings); the rest (the

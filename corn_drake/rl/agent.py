@@ -1,6 +1,6 @@
 """TeacherAgent: observation dict -> (action mean, value), for every policy variant.
 
-Variants (the paper's names, corn_drake/policy_kinds.py): `corn` — frozen contact-pretrained patch
+Variants (the paper's names, corn_drake/rl/policy_kinds.py): `corn` — frozen contact-pretrained patch
 encoder + cross-attention head; `e2e` — the same encoder randomly initialised and trained by PPO;
 `p2v-lite` / `rot` — the same encoder pretrained on a pretext task (pretext/), frozen, with the
 same cross-attention head as `corn`; `pn` — a frozen pretrained PointNet's global feature + MLP
@@ -32,11 +32,11 @@ from torch import nn
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
 from corn_drake.errors import InputError, load_error_detail
 from corn_drake.nn.attention import PatchAttention, nearest_patch, patch_scores
-from corn_drake.nn.encoder_io import NormalizedEncoder
+from corn_drake.nn.encoder_files import NormalizedEncoder
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.patchify import patch_indices
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic, gaussian_action
-from corn_drake.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS, TOKEN_POLICIES
+from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS, TOKEN_POLICIES
 from corn_drake.rl.normalization import RunningMeanStd
 
 # The variants whose head cross-attends over the encoder's patch tokens.

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from corn_drake.config import TrainConfig
+from corn_drake.config.training import TrainConfig
 from corn_drake.errors import MissingInputError, load_error_detail
-from corn_drake.io_utils import load_checkpoint
+from corn_drake.storage.checkpoint_files import load_checkpoint
 from corn_drake.rl.agent import TeacherAgent
-from corn_drake.rl.encoders import load_encoder
-from corn_drake.run_config import load_run_config
+from corn_drake.rl.pretrained_encoders import load_encoder
+from corn_drake.run_folders.config_file import load_run_config
 
 
 def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
@@ -70,18 +70,18 @@ def load_student_run(run_dir: str | Path):
     """(DistillConfig, StudentPolicy in eval mode) of a `corn-drake distill` run folder, from its
     config.yaml and checkpoints/last.pt (prev.pt if need be). The student's state_dict carries
     its encoder's input normalisation and token statistics, so no encoder file is read."""
-    from corn_drake.config import load_config
-    from corn_drake.config_distill import DistillConfig
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
     from corn_drake.nn.student import StudentPolicy
-    from corn_drake.run_config import run_config_path
+    from corn_drake.run_folders.config_file import run_config_path
 
     run_dir = Path(run_dir)
     path = run_config_path(run_dir)
     if not path.is_file():
         raise MissingInputError(f"{path} not found: is {run_dir} a run folder written by "
                                 "`corn-drake distill`?")
-    cfg = load_config(path, DistillConfig)
+    cfg = load_config(DistillConfig, path)
     ckpt = run_dir / "checkpoints" / "last.pt"
     state = load_checkpoint(ckpt, required=("kind", "student"))
     if state is None or state["kind"] != "student":

@@ -33,18 +33,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from corn_drake.config_distill import DistillConfig
+from corn_drake.config.training import DistillConfig
 from corn_drake.contract import STUDENT_OBS_KEYS
 from corn_drake.errors import InputError, load_error_detail
-from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
+from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
+from corn_drake.storage.atomic_files import write_json
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.nn.threads import torch_threads
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
-from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch, recent_mean,
-                                           progress_state, restore_progress, to_cpu)
-# WINDOW: finished episodes behind the logged success rate and tracking error.
-from corn_drake.viz.learning_curves import WINDOW
+from corn_drake.rl.run_progress import (count_episodes_per_object, make_env_batch, progress_state,
+                                        recent_mean, restore_progress, to_cpu)
+from corn_drake.contract import RECENT_EPISODES
 
 CHECKPOINT_KEYS = ("kind", "student", "optimizer", "global_step", "update_index", "beta",
                    "history", "recent_episodes", "episodes_per_object", "torch_rng", "generator",
@@ -225,7 +225,7 @@ class DaggerTrainer:
             self.global_step += steps
             steps_since += steps
             self.update_index += 1
-            self.recent_episodes = (self.recent_episodes + stats["episodes"])[-WINDOW:]
+            self.recent_episodes = (self.recent_episodes + stats["episodes"])[-RECENT_EPISODES:]
             count_episodes_per_object(self.episodes_per_object, stats["episodes"])
             bar.update(steps)
             if self.update_index % cfg.log_every == 0 or self.global_step >= cfg.total_steps:
@@ -279,7 +279,7 @@ def plot_distill_curves(history: list[dict], path: Path) -> None:
     """DAgger loss and success rate against env steps."""
     from matplotlib.figure import Figure
 
-    from corn_drake.io_utils import atomic_path
+    from corn_drake.storage.atomic_files import atomic_path
 
     if not history:
         return
@@ -294,7 +294,7 @@ def plot_distill_curves(history: list[dict], path: Path) -> None:
     axes[0].legend()
     axes[1].plot(steps, [h["success_rate"] for h in history], label="success")
     axes[1].plot(steps, [h["beta"] for h in history], "--", label="beta")
-    axes[1].set(xlabel="env steps", ylabel=f"last {WINDOW} episodes", ylim=(0, 1))
+    axes[1].set(xlabel="env steps", ylabel=f"last {RECENT_EPISODES} episodes", ylim=(0, 1))
     axes[1].legend()
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

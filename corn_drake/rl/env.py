@@ -6,7 +6,7 @@ writes it into the context (TeacherDiagram.write_episode); step() fixes the acti
 advances one policy period and reads reward, status and termination. What the policy sees is
 the subclass's: TeacherEnv returns the teacher's privileged observation (TeacherObservationReader);
 corn_drake/rl/student_env.py's StudentEnv returns the student's and the teacher's of the same
-state. Whole episodes with a policy, recordings and reports are corn_drake/evaluation.py's job.
+state. Whole episodes with a policy, recordings and reports are corn_drake/evaluation/episodes.py's job.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ import gymnasium as gym
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from corn_drake.config import TeacherDiagramConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, OBS_KEYS, check_action
-from corn_drake.diagrams import TeacherDiagram, build_teacher_diagram, load_teacher_config
+from corn_drake.builders.teacher import TeacherDiagram, build_teacher_diagram
+from corn_drake.config.diagram_files import load_teacher_config
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.reward import STATUS_FIELDS
 from corn_drake.tasks.episode import Episode, sample_episode

@@ -21,7 +21,7 @@ from typing import Callable
 import torch
 from torch import nn
 
-from corn_drake.config import PPOConfig
+from corn_drake.config.training import PPOConfig
 
 Obs = dict[str, torch.Tensor]
 

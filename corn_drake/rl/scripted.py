@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corn_drake.config import ControllerConfig
+from corn_drake.config.scene import ControllerConfig
 from corn_drake.contract import ACTION_DIM, ACTION_SLICES, NUM_KEYPOINTS
 from corn_drake.scene.objects import TABLE_TOP_Z
 from corn_drake.transforms import from_pose9

@@ -25,9 +25,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from corn_drake.config_student import SEGMENTATION_MODES, StudentDiagramConfig
+from corn_drake.config.student import SEGMENTATION_MODES, StudentDiagramConfig
 from corn_drake.contract import STUDENT_OBS_KEYS, student_observation_shapes
-from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, load_student_config
+from corn_drake.builders.student import StudentDiagram, build_student_diagram
+from corn_drake.config.diagram_files import load_student_config
 from corn_drake.errors import InputError
 from corn_drake.rl.env import DiagramEnv, TeacherObservationReader
 from corn_drake.scene.objects import ObjectSpec

@@ -20,18 +20,20 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from corn_drake.config import TrainConfig
+from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
-from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
+from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
+from corn_drake.storage.atomic_files import write_json
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.checkpoints import init_agent_state, snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
 from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
-from corn_drake.viz.learning_curves import WINDOW, plot_learning_curves
+from corn_drake.contract import RECENT_EPISODES
+from corn_drake.viz.learning_curves import plot_learning_curves
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
-from corn_drake.rl.training_common import (count_episodes_per_object, make_env_batch,  # noqa: F401
-                                           progress_state, restore_progress, to_cpu)
+from corn_drake.rl.run_progress import (count_episodes_per_object, make_env_batch, progress_state,
+                                        restore_progress, to_cpu)
 
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
 CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "update_index",
@@ -176,7 +178,7 @@ class Trainer:
             steps = cfg.rollout_steps * n_envs
             self.global_step += steps
             self.update_index += 1
-            self.recent_episodes = recent = (self.recent_episodes + episodes)[-WINDOW:]
+            self.recent_episodes = recent = (self.recent_episodes + episodes)[-RECENT_EPISODES:]
             count_episodes_per_object(self.episodes_per_object, episodes)
             row = {"step": self.global_step, "update": self.update_index,
                    "steps_per_s": steps / (time.perf_counter() - t0), "kl": stats["kl"],

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from corn_drake.config import TeacherDiagramConfig
-from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.errors import InputError
 
 # StudentEnv's tracking errors (info["tracking"]) whose episode means join the episode stats

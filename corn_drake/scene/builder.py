@@ -14,7 +14,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import ModelInstanceIndex, RigidBody, SpatialInertia, UnitInertia
 from pydrake.systems.framework import DiagramBuilder
 
-from corn_drake.config import SceneConfig
+from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.franka import FINGER_BODIES, add_franka
 from corn_drake.scene.friction import geometry_friction
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
@@ -135,7 +135,7 @@ def build_table_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpe
 
 def build_scene(builder: DiagramBuilder, cfg: SceneConfig, spec: ObjectSpec) -> Scene:
     """Adds plant + scene graph to `builder`; the plant is finalized on return."""
-    # Drake's plant settings as the config holds them (config.py says why its ports are unsampled).
+    # Drake's plant settings as the config holds them (config/scene.py says why its ports are unsampled).
     plant, scene_graph = AddMultibodyPlant(cfg.physics.plant, builder)
     panda = add_franka(plant, RigidTransform(cfg.robot_base), cfg.physics.armature)
     if not cfg.physics.gravity_on_robot:

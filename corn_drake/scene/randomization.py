@@ -13,8 +13,7 @@ import numpy as np
 from pydrake.geometry import (AddRigidHydroelasticProperties, ProximityProperties, RoleAssign)
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
-from corn_drake.config import RandomizationConfig
-from corn_drake.errors import InputError
+from corn_drake.config.scene import RandomizationConfig
 from corn_drake.scene.builder import (DEFAULT_FINGER_FRICTION, DEFAULT_OBJECT_FRICTION,
                                       DEFAULT_TABLE_FRICTION, Scene, friction_properties,
                                       object_proximity_properties, object_shapes,
@@ -49,14 +48,6 @@ def nominal_sample(scene: Scene) -> PhysicsSample:
                          torque_noise_std=0.0)
 
 
-def check_randomization(cfg: RandomizationConfig) -> None:
-    """InputError naming a randomization range no draw can come from."""
-    r = cfg.object_radius
-    if r is not None and not (len(r) == 2 and 0 < r[0] <= r[1]):
-        raise InputError(f"randomization.object_radius must be [low, high] with 0 < low <= "
-                         f"high (m), or null to keep the object's size; got {r}")
-
-
 def sample_physics(cfg: RandomizationConfig, scene: Scene, rng: np.random.Generator) -> PhysicsSample:
     if not cfg.enabled:
         return nominal_sample(scene)
@@ -64,7 +55,7 @@ def sample_physics(cfg: RandomizationConfig, scene: Scene, rng: np.random.Genera
     def u(r):
         return float(rng.uniform(r[0], r[1]))
 
-    check_randomization(cfg)
+    cfg.check()
     scale = 1.0
     if cfg.object_radius is not None:
         scale = u(cfg.object_radius) / scene.object_spec.radius

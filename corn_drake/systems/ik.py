@@ -16,7 +16,7 @@ import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from corn_drake.config import ControllerConfig
+from corn_drake.config.scene import ControllerConfig
 from corn_drake.contract import (ACTION_DIM, ACTION_SLICES, FREE_BODY_POSITION,
                                  FREE_BODY_STATE_DIM, ROBOT_STATE_DIM, check_action)
 from corn_drake.scene.franka import NUM_JOINTS, make_controller_plant, tool_frame

@@ -20,7 +20,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem, OutputPort
 from pydrake.systems.primitives import Multiplexer, ZeroOrderHold
 
-from corn_drake.config import TaskConfig
+from corn_drake.config.task import TaskConfig
 from corn_drake.contract import (FREE_BODY_STATE_DIM, HAND_STATE_DIM, KEYPOINTS_DIM, POSE7_DIM,
                                  POSE7_POSITION, POSE7_QUATERNION, POSE9_POSITION, POSITION_DIM,
                                  free_body_pose)

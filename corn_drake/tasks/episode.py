@@ -2,7 +2,7 @@
 
 Every diagram that runs episodes (the gymnasium env, evaluation, the student's rollouts) draws
 an Episode here and writes it into its context with TeacherDiagram.write_episode
-(corn_drake/diagrams.py).
+(corn_drake/builders/teacher.py).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from corn_drake.tasks.sampling import sample_object_and_goal, sample_robot_joint
 if typing.TYPE_CHECKING:
     from pydrake.math import RigidTransform
 
-    from corn_drake.config import TeacherDiagramConfig
+    from corn_drake.config.teacher import TeacherDiagramConfig
     from corn_drake.scene.builder import Scene
 
 

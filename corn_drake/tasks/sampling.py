@@ -1,6 +1,6 @@
 """Draws an episode's robot joints, object start pose and goal pose for a TaskConfig.
 
-One function per goal variant (corn_drake/tasks/specs.py), chosen by the type of `task.goal`.
+One function per goal variant (corn_drake/config/task.py), chosen by the type of `task.goal`.
 Each draw that must meet a condition (distance to the hand, goal region, goal distance) gets
 TRIES attempts; when none meets it the sampler raises InputError naming the task and the
 ranges, because keeping the last, failed draw would silently train on a different task.
@@ -17,11 +17,11 @@ from pydrake.math import RotationMatrix
 from corn_drake.contract import NUM_JOINTS, POSE7_DIM
 from corn_drake.errors import InputError
 from corn_drake.scene.franka import JOINT_LOWER, JOINT_UPPER
-from corn_drake.tasks.specs import Full6dGoal, PlanarGoal, PushFromHandGoal
+from corn_drake.config.task import Full6dGoal, PlanarGoal, PushFromHandGoal
 from corn_drake.transforms import quat_wxyz_to_matrix, yaw_matrix
 
 if typing.TYPE_CHECKING:
-    from corn_drake.config import TaskConfig
+    from corn_drake.config.task import TaskConfig
 
 TRIES = 1000
 TABLE_MARGIN = 0.95  # objects start within 95 % of the table, minus their radius
@@ -146,29 +146,6 @@ def _push_from_hand(d: _Draw, g: PushFromHandGoal) -> tuple[np.ndarray, np.ndarr
 _SAMPLERS = {Full6dGoal: _full6d, PlanarGoal: _planar, PushFromHandGoal: _push_from_hand}
 
 
-def check_task(task: TaskConfig) -> None:
-    """Raises InputError naming the first range of `task` that is not [low, high] with
-    low <= high (and distances and angles >= 0)."""
-    g = task.goal
-    if type(g) not in _SAMPLERS:
-        raise InputError(f"task {task.name!r}: task.goal must be one of "
-                         f"{[c.__name__ for c in _SAMPLERS]}, got {type(g).__name__}")
-    ranges = {"task.goal_x": task.goal_x, "task.goal_y": task.goal_y}
-    scalars = {}
-    for field, value in vars(g).items():
-        (ranges if isinstance(value, list) else scalars)[f"task.goal.{field}"] = value
-    for name, r in ranges.items():
-        if len(r) != 2 or not r[0] <= r[1]:
-            raise InputError(f"task {task.name!r}: {name} must be [low, high] with low <= high, "
-                             f"got {r}")
-    for name, value in scalars.items():
-        if value < 0:
-            raise InputError(f"task {task.name!r}: {name} must be >= 0, got {value}")
-    if len(task.robot_init_low) != NUM_JOINTS or len(task.robot_init_high) != NUM_JOINTS:
-        raise InputError(f"task {task.name!r}: task.robot_init_low / robot_init_high need "
-                         f"{NUM_JOINTS} joint values each")
-
-
 def sample_object_and_goal(task: TaskConfig, stable_poses: np.ndarray, radius: float,
                            thin: bool, table_size, hand_xy: np.ndarray,
                            rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -178,7 +155,7 @@ def sample_object_and_goal(task: TaskConfig, stable_poses: np.ndarray, radius: f
     radius: its bounding radius (scaled); thin: whether it only gets yaw goals (Full6dGoal);
     table_size: the table's [x, y, z] extent; hand_xy: the tool's xy at the episode's start.
     """
-    check_task(task)
+    task.check()
     if len(stable_poses) == 0 or np.shape(stable_poses)[1:] != (POSE7_DIM,):
         raise InputError(f"task {task.name!r}: the object needs stable poses as (n, "
                          f"{POSE7_DIM}) rows, got shape {np.shape(stable_poses)}")

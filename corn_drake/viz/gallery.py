@@ -9,9 +9,8 @@ position as a red dot. Only points the
 depth image shows are painted: a point behind the object's own surface or behind the hand
 stays hidden, so the colours sit on what the camera sees.
 
-The episode runs in a TeacherEnv stepped by evaluation.run_episode with the agent's
-act_and_attend (the mean action), so the scores painted are those of the observation each action was chosen from; the
-render diagram is a second copy of the scene whose positions are set from the env's plant.
+The episode itself is run in evaluation/stills.py (viz runs no env); the render diagram here
+is a second copy of the scene whose positions are set from the env's plant.
 """
 
 from __future__ import annotations
@@ -21,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from corn_drake.contract import POSITION_DIM
 
 # The eye looks at the midpoint of the object's start and goal from the side of the push (the
 # hand pushes along start -> goal, so from behind or in front it would hide the object), on
@@ -110,43 +108,6 @@ def paint(image: np.ndarray, depth: np.ndarray, pixels: np.ndarray, z: np.ndarra
     return out, len(idx)
 
 
-def episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middle,end"
-                   ) -> tuple[list[Still], dict]:
-    """Runs one episode of `agent` (mean actions) on `spec` in the env of `cfg` (a
-    TeacherDiagramConfig) and renders the stills of `steps_wanted` ("start", "middle", "end",
-    or step numbers). Returns (stills, episode summary)."""
-    from corn_drake.evaluation import run_episode
-    from corn_drake.rl.env import TeacherEnv
-    from corn_drake.viz.attention_view import viridis_rgb
-
-    env = TeacherEnv(cfg, spec)
-    frames = []  # (step, plant positions, cloud, point scores) of every observation
-
-    def act_and_keep(obs):
-        action, attention = agent.act_and_attend(obs)
-        frames.append((len(frames), env.scene.plant.GetPositions(env._plant_context).copy(),
-                       obs["cloud"].reshape(-1, POSITION_DIM).copy(), attention.point_scores()))
-        return action
-
-    # evaluate's own episode runner, so the outcome is the one evaluate reports for this seed.
-    result = run_episode(env, act_and_keep, seed=seed)
-    act_and_keep(env._observation())  # the observation the episode ended on: the "end" still
-    picks = _pick_steps(steps_wanted, len(frames))
-    start, goal = env.episode.initial_object_pose[:3], env.episode.goal_pose[:3]
-    camera = StillCamera(cfg.scene, spec, *side_view(start, goal))
-    stills = []
-    for k in picks:
-        step, positions, cloud, scores = frames[k]
-        rgb, depth = camera.render(positions)
-        pixels, z = camera.project(cloud)
-        image, painted = paint(rgb, depth, pixels, z, viridis_rgb(scores))
-        goal_pixel, goal_z = camera.project(goal[None])
-        image, _ = paint(image, np.full(depth.shape, np.inf), goal_pixel, goal_z,
-                         GOAL_COLOUR[None], radius=2 * POINT_RADIUS_PX)  # drawn over everything
-        stills.append(Still(step, image, painted))
-    summary = {"seed": seed, "steps": result.steps, "success": result.success,
-               "position_error": result.status.get("position_error")}
-    return stills, summary
 
 
 def side_view(start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +121,7 @@ def side_view(start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return target + np.array([*(EYE_SIDE * side), EYE_UP]), target
 
 
-def _pick_steps(wanted: str, n: int) -> list[int]:
+def pick_steps(wanted: str, n: int) -> list[int]:
     names = {"start": 0, "middle": (n - 1) // 2, "end": n - 1}
     picks = []
     for word in wanted.split(","):
@@ -176,7 +137,7 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
     """`image` as a PNG, written atomically."""
     from PIL import Image
 
-    from corn_drake.io_utils import atomic_path
+    from corn_drake.storage.atomic_files import atomic_path
 
     path = Path(path)
     with atomic_path(path) as tmp:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-# Finished episodes behind the logged success rate and return (the trainer's window).
-WINDOW = 100
+from corn_drake.contract import RECENT_EPISODES
+
 X_AXES = ("steps", "hours")
 RATES = ("median", "recorded")
 
@@ -48,11 +48,11 @@ def first_full_window(history: list[dict]) -> int:
     """Index of the first row whose success rate averages a full window of episodes.
 
     Rows before the first finished episode hold placeholder zeros, and those before the window
-    holds WINDOW episodes average over the few that ended first — mostly early successes, since
-    a success ends an episode. Curves start at a full window (or, for runs that never fill it,
+    holds RECENT_EPISODES episodes average over the few that ended first — mostly early
+    successes, since a success ends an episode. Curves start at a full window (or, for runs that never fill it,
     at the first finished episode)."""
     done = np.cumsum([h["episodes"] for h in history])
-    full = np.flatnonzero(done >= WINDOW)
+    full = np.flatnonzero(done >= RECENT_EPISODES)
     if len(full):
         return int(full[0])
     return int(np.argmax(done > 0)) if len(done) and done[-1] else len(history)
@@ -95,7 +95,7 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "step
     from matplotlib.figure import Figure
     from matplotlib.ticker import EngFormatter
 
-    from corn_drake.io_utils import atomic_path
+    from corn_drake.storage.atomic_files import atomic_path
 
     runs = {label: history for label, history in runs.items() if history}
     if not runs:

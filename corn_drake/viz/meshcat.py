@@ -6,7 +6,7 @@ from pathlib import Path
 
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 
-from corn_drake.io_utils import write_text
+from corn_drake.storage.atomic_files import write_text
 
 
 def add_meshcat_visualizer(builder, scene_graph, meshcat: Meshcat, publish_period: float = 0.05):

@@ -14,7 +14,8 @@ import math
 
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config import TeacherDiagramConfig, pickle_as_yaml
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.yaml_io import pickle_as_yaml
 from corn_drake.contract import ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
 

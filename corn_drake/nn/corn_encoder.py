@@ -6,7 +6,7 @@ Position: cat(centre (3), MLP 3 -> 128 -> 125 (GELU)) added to each patch token.
 Hand token: Linear(9 -> 128) on tool position + 6D rotation, placed first.
 Transformer: 2 pre-LN layers, width 128, 4 heads, feed-forward 128 (GELU), then a final LN.
 Inputs are normalised points and hand position (nn/input_normalization.py; NormalizedEncoder in
-nn/encoder_io.py applies the normalisation the encoder was pretrained with).
+nn/encoder_files.py applies the normalisation the encoder was pretrained with).
 """
 
 from __future__ import annotations

@@ -11,9 +11,10 @@ import time
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.contract import ACTION_DIM
-from corn_drake.diagrams_student import StudentDiagram, build_student_diagram, load_student_config
+from corn_drake.builders.student import StudentDiagram, build_student_diagram
+from corn_drake.config.diagram_files import load_student_config
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
 from corn_drake.systems.pose_tracker import TrackerState, pose_error
 from corn_drake.systems.segmentation import SegmentationStats

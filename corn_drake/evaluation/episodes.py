@@ -85,7 +85,7 @@ def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int |
     StudentPolicy in eval mode). `seed` replaces the teacher part's seed (the object cloud
     subset, the episode generator's default). `attention`: the teacher's attention view
     (TeacherEnv)."""
-    from corn_drake.config_student import StudentDiagramConfig
+    from corn_drake.config.student import StudentDiagramConfig
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.student_env import StudentEnv
 

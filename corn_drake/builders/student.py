@@ -4,7 +4,7 @@
         --> ObjectSegmentation (robot state for the link test) --> PoseTracker (ICP)
         --> StudentObservations (+ RandomSource cloud and goal noise)
 
-Exported ports (besides the teacher's, see corn_drake.diagrams): input `controller.action`
+Exported ports (besides the teacher's, see corn_drake.builders.teacher): input `controller.action`
 (absent when a StudentPolicySystem acts inside the diagram);
 outputs `student.<key>` for STUDENT_OBS_KEYS, `perception.pose` (pose7, estimated),
 `perception.status` (PoseTracker STATUS_FIELDS), `perception.num_points`,
@@ -17,19 +17,17 @@ diagrams/student_rollout.yaml) on top of `base` (default: StudentDiagramConfig()
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, RandomSource
 
-import corn_drake
-from corn_drake.config import load_config
-from corn_drake.config_student import StudentDiagramConfig
+from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
                                  POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
-from corn_drake.diagrams import TeacherDiagram, add_teacher_systems, close_policy_loop
+from corn_drake.builders.teacher import TeacherDiagram, add_teacher_systems, close_policy_loop
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
@@ -62,25 +60,6 @@ class StudentDiagram:
     def policy(self):
         """The StudentPolicySystem of an evaluation diagram (None in a rollout diagram)."""
         return self.teacher.policy
-
-
-def student_base_path() -> Path:
-    """The base student diagram: diagrams/student_rollout.yaml."""
-    return Path(corn_drake.DIAGRAMS_DIR) / "student_rollout.yaml"
-
-
-def load_student_config(path: str | Path | None = None,
-                        base: StudentDiagramConfig | None = None) -> StudentDiagramConfig:
-    """The YAML at `path` (default: the base diagram, student_base_path()) read on top of `base`
-    (default: StudentDiagramConfig()), then checked: a layer names only what differs from the
-    config below it. `base` is not modified. A missing file, bad YAML, an unknown key, a wrong
-    type or a value the diagram cannot run with raises an InputError naming the file or field.
-    """
-    path = Path(path) if path is not None else student_base_path()
-    # yaml_load_typed copies `defaults`: the caller's base is left as it was.
-    cfg = load_config(path, StudentDiagramConfig, defaults=base or StudentDiagramConfig())
-    cfg.check()
-    return cfg
 
 
 def _pose7_selector() -> np.ndarray:

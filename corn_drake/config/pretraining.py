@@ -1,14 +1,35 @@
-"""PretextConfig: one pretext pretraining run (`corn-drake pretrain --model p2v-lite|rot`),
-recorded in RUN/config.yaml.
+"""Configs of the pretraining runs: contact pretraining (PretrainConfig) and the pretext baselines
+(PretextConfig, `corn-drake pretrain --model p2v-lite|rot`), each recorded in RUN/config.yaml.
 
-The optimisation fields have PretrainConfig's names (the loop in pretrain_loop.py reads either);
-the defaults differ by model (PRETEXT_DEFAULTS), so `pretext_config(model)` is how a config is
-made. No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+The optimisation fields have the same names in both (the loop in pretraining/loop.py reads
+either); the pretext defaults differ by model (PRETEXT_DEFAULTS), so `pretext_config(model)` is
+how a pretext config is made. No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
 """
 
 import dataclasses as dc
 
 from corn_drake.errors import InputError
+
+
+@dc.dataclass
+class PretrainConfig:
+    """Contact pretraining (paper: AdamW 2e-4, wd 5e-4, batch 1024, cosine schedule + warm-up)."""
+    model: str = "corn"  # corn | pointnet
+    steps: int = 2000
+    batch_size: int = 1024
+    lr: float = 2e-4
+    min_lr: float = 1e-6
+    weight_decay: float = 5e-4
+    warmup_steps: int = 100
+    max_grad_norm: float = 4.0
+    # Augmentation (train split only): yaw about the cloud centroid, translation, point noise.
+    translate_std: float = 0.04  # m (0.1 in normalised units)
+    point_noise_std: float = 0.004  # m (0.01 in normalised units)
+    eval_every: int = 250
+    checkpoint_every: int = 250
+    eval_samples: int = 4096
+    seed: int = 0
+
 
 PRETEXT_MODELS = ("p2v-lite", "rot")
 

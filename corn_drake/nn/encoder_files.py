@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from corn_drake.errors import InputError, MissingInputError, load_error_detail, network_mismatch
-from corn_drake.io_utils import atomic_path
+from corn_drake.storage.atomic_files import atomic_path
 from corn_drake.nn.input_normalization import InputNormalization
 
 ENCODER_KINDS = ("corn", "pointnet", "p2v-lite", "rot")
@@ -33,7 +33,7 @@ PATCH_ENCODER_KINDS = ("corn", "p2v-lite", "rot")  # CORNEncoder networks
 
 def make_network(kind: str) -> nn.Module:
     """A freshly initialised network of `kind` (ENCODER_KINDS), without normalisation."""
-    from corn_drake.nn.encoder import CORNEncoder
+    from corn_drake.nn.corn_encoder import CORNEncoder
     from corn_drake.nn.pointnet import PointNetEncoder
 
     if kind in PATCH_ENCODER_KINDS:
@@ -86,7 +86,7 @@ def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]
     input normalisation it was pretrained with: CORNContactModel for "corn" (patch logits),
     PointNetContactModel for "pointnet" (point logits). An encoder file without a head (a
     pretext kind, or one exported before heads were kept) is an InputError naming it."""
-    from corn_drake.nn.encoder import CORNContactModel
+    from corn_drake.nn.corn_encoder import CORNContactModel
     from corn_drake.nn.pointnet import PointNetContactModel
 
     encoder, state = _read_encoder_file(path)

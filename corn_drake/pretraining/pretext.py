@@ -1,7 +1,7 @@
 """Pretext pretraining of the CORN patch encoder for the P2V-lite and ROT baselines.
 
 The loop, checkpoints (resumable to the same step with every RNG stream), TensorBoard, metrics.json
-and the encoder.pt export are contact pretraining's (pretrain_loop.py); this supplies the data
+and the encoder.pt export are contact pretraining's (pretraining/loop.py); this supplies the data
 (pretext/clouds.py: the object library's clouds, drawn on the fly), the models (pretext/p2v.py,
 pretext/rot.py) and what "learned" means for a task whose loss has no fixed scale.
 
@@ -13,7 +13,7 @@ placements; unseen: the library's unseen objects), drawn once from the run's see
   predicted as the mean target over the set; ROT: the one rotation closest to all targets, their
   chordal mean; against uniform relative rotations every constant scores about 6, 126 deg);
 - skill = 1 - loss / reference_loss: 0 for a model that ignores its input, 1 for a perfect one.
-  This is the record policies check (rl/encoders.MIN_PRETEXT_SKILL); a plain loss cannot be,
+  This is the record policies check (rl/pretrained_encoders.MIN_PRETEXT_SKILL); a plain loss cannot be,
   since P2V-lite's targets move with its teacher.
 - P2V-lite also reports target_std / prediction_std (std over patches, mean over channels;
   point2vec's collapse check: targets near 0 std would make any loss small); ROT the mean
@@ -28,14 +28,14 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from corn_drake.config_pretext import PretextConfig
-from corn_drake.nn.encoder import CORNEncoder
+from corn_drake.config.pretraining import PretextConfig
+from corn_drake.nn.corn_encoder import CORNEncoder
 from corn_drake.nn.geometry import random_rotations, rotation_angle
 from corn_drake.pretext.clouds import SPLITS, LibraryClouds
 from corn_drake.pretext.p2v import P2VLiteModel, ema_decay, random_patch_mask
 from corn_drake.pretext.rot import (RelativeRotationModel, chordal_mean, frobenius_loss,
                                     relative_rotation)
-from corn_drake.pretrain_loop import PretrainLoop
+from corn_drake.pretraining.loop import PretrainLoop
 
 EVAL_CHUNK = 256  # clouds per forward pass in an evaluation
 

@@ -1,5 +1,5 @@
-"""The training loop every encoder pretraining shares: contact (contact/pretrain.py) and the
-pretext baselines P2V-lite and ROT (pretext/pretrain.py).
+"""The training loop every encoder pretraining shares: contact (pretraining/contact.py) and the
+pretext baselines P2V-lite and ROT (pretraining/pretext.py).
 
 A subclass says what a step's loss is, what an evaluation measures and which module is the
 encoder; this loop owns the rest, so every pretraining has the same run folder: config.yaml
@@ -25,8 +25,9 @@ import torch
 from torch import nn
 
 from corn_drake.errors import InputError, network_mismatch
-from corn_drake.io_utils import load_checkpoint, save_checkpoint, write_json
-from corn_drake.nn.encoder_io import NormalizedEncoder, save_encoder
+from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
+from corn_drake.storage.atomic_files import write_json
+from corn_drake.nn.encoder_files import NormalizedEncoder, save_encoder
 from corn_drake.nn.input_normalization import InputNormalization
 
 
@@ -100,7 +101,7 @@ class PretrainLoop:
     @property
     def contact_head(self) -> nn.Module | None:
         """The head encoder.pt keeps beside the encoder (nn/encoder_io.load_contact_model):
-        the contact models' (contact/pretrain.py); none for the pretext tasks."""
+        the contact models' (pretraining/contact.py); none for the pretext tasks."""
         return None
 
     @property

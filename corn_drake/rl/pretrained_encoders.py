@@ -1,4 +1,4 @@
-"""Which encoder each policy variant gets (corn_drake/policy_kinds.py): corn — the frozen
+"""Which encoder each policy variant gets (corn_drake/rl/policy_kinds.py): corn — the frozen
 contact-pretrained patch encoder; p2v-lite / rot — the frozen patch encoder pretrained on that
 pretext task (pretext/); pn — the frozen contact-pretrained PointNet; e2e — a fresh patch encoder
 trained by PPO; state — none.
@@ -11,8 +11,8 @@ import math
 from pathlib import Path
 
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_io import NormalizedEncoder, load_frozen_encoder, make_policy_encoder
-from corn_drake.policy_kinds import ENCODER_KIND
+from corn_drake.nn.encoder_files import NormalizedEncoder, load_frozen_encoder, make_policy_encoder
+from corn_drake.rl.policy_kinds import ENCODER_KIND
 
 # A frozen encoder must have learned its pretext task before a policy is trained on it: a
 # PointNet with 367 pretraining steps (patch F1 0.000, all "no contact") once made every `pn`
@@ -21,7 +21,7 @@ from corn_drake.policy_kinds import ENCODER_KIND
 MIN_CONTACT_F1 = 0.8
 
 # The pretext encoders' bar (p2v-lite, rot): their pretraining record's skill, 1 - loss / the
-# loss of the best prediction that ignores the input (pretext/pretrain.py), on unseen objects
+# loss of the best prediction that ignores the input (pretraining/pretext.py), on unseen objects
 # when measured, else held-out placements. 0 is an encoder whose output says nothing its task
 # can use, and a fresh one scores <= 0 (-0.06 for both tasks on the 80-object library).
 # Measured there on one CPU: P2V-lite reached 0.46 after 100 steps of 32 clouds and 0.55 after

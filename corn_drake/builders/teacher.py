@@ -12,7 +12,6 @@ Exported ports: input `controller.action`; outputs `obs.<key>` for each observat
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 from pydrake.common import RandomDistribution, RandomGenerator
@@ -21,10 +20,11 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, RandomSource, ZeroOrderHold
 
-from corn_drake.config import ObjectConfig, TeacherDiagramConfig
+from corn_drake.config.scene import ObjectConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, NUM_JOINTS
 from corn_drake.errors import InputError
-from corn_drake.run_config import load_env_config
+from corn_drake.config.diagram_files import load_teacher_config
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
 from corn_drake.scene.randomization import apply_physics
@@ -120,12 +120,6 @@ def reseed_random_sources(diagram: Diagram, context, rng: np.random.Generator) -
                                     RandomGenerator(int(rng.integers(2 ** 32))))
             count += 1
     return count
-
-
-def load_teacher_config(path: str | Path | None = None) -> TeacherDiagramConfig:
-    """The teacher diagram's config: the base diagram (diagrams/teacher_rollout.yaml), with the
-    task overlay `path` (a YAML file or a task name, as `--task`) on top."""
-    return load_env_config(path)
 
 
 def add_teacher_systems(builder: DiagramBuilder, cfg: TeacherDiagramConfig,

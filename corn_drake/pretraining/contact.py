@@ -4,7 +4,7 @@ The CORN model predicts, per patch (16 FPS centres x 32 sorted neighbours), whet
 touches it; a patch is positive if any of its points is inside the gripper. The PointNet baseline
 predicts per point; its patch predictions are the max over the same patches, so both get the
 same patch-level metrics. The loop, checkpoints (resumable to the same step) and the run folder
-are pretrain_loop.py's, shared with the pretext baselines (pretext/); this adds
+are pretraining/loop.py's, shared with the pretext baselines (pretext/); this adds
 plots/predictions.png.
 """
 
@@ -18,17 +18,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.config import PretrainConfig
+from corn_drake.config.pretraining import PretrainConfig
 from corn_drake.contact.shards import load_split
-from corn_drake.io_utils import atomic_path
-from corn_drake.nn.encoder import CORNContactModel
+from corn_drake.storage.atomic_files import atomic_path
+from corn_drake.nn.corn_encoder import CORNContactModel
 from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
 from corn_drake.nn.input_normalization import InputNormalization
 from corn_drake.nn.metrics import binary_metrics
 from corn_drake.nn.patchify import gather_points, patch_indices
 from corn_drake.nn.pointnet import PointNetContactModel
-from corn_drake.pretrain_loop import PretrainLoop
+from corn_drake.pretraining.loop import PretrainLoop
 
 
 def hand9(hand_pose: torch.Tensor, normalization: InputNormalization) -> torch.Tensor:
@@ -68,7 +68,7 @@ def patch_labels(labels: torch.Tensor, knn_idx: torch.Tensor) -> torch.Tensor:
 
 
 class Pretrainer(PretrainLoop):
-    """Contact pretraining on the shards of a contact-data folder (the loop: pretrain_loop.py)."""
+    """Contact pretraining on the shards of a contact-data folder (the loop: pretraining/loop.py)."""
 
     def __init__(self, cfg: PretrainConfig, data: str | Path, out: str | Path):
         if cfg.model not in ("corn", "pointnet"):

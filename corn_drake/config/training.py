@@ -1,0 +1,178 @@
+"""The configs a training run records in RUN/config.yaml: PPO (`corn-drake train`, TrainConfig) and
+DAgger (`corn-drake distill`, DistillConfig), both on the run settings they share (RunSettings).
+
+No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+"""
+
+import dataclasses as dc
+import typing
+
+from corn_drake.config.student import StudentDiagramConfig
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.errors import InputError
+
+
+@dc.dataclass
+class PPOConfig:
+    """PPO settings; where each default comes from (paper = Table "Hyperparameters for PPO" of
+    the CORN paper, code = the authors' models/rl/v6/ppo.py with cloud_arm_mlp_base.yaml, see
+    shared/reference/corn_official_code.md section 4):
+
+    gamma 0.99, gae_lambda 0.95, clip 0.3, epochs 8, lr 3e-4, kl_target 0.016: paper and code.
+    kl_stop_factor 1.5: the paper's early-stopping KL target 0.024 = 1.5 x 0.016 (code: the
+    same, the first minibatch of an update exempt). lr_min 1e-6, lr_max 1e-2 and the x1.5 / /1.5
+    steps of the adaptive lr: code. minibatches 1: code (chunk_size 1, the whole rollout).
+    policy_coef 0.5, value_coef 2.0: code (k_pi 0.5, k_val 2.0, and its value loss is
+    0.5 * MSE, as ours). The paper's table prints "policy 2, value 0.5": the code's numbers
+    with the names swapped; we follow the code, which produced the paper's results.
+    bound_coef 0.02: paper and code; bound_limit 1.1 and max_grad_norm 1.0: code.
+    Entropy bonus 0 (paper and code): none is implemented.
+
+    separate_critic, critic_lr: ours, off by default (the authors share the trunk). With it the
+    value comes from a second head of the same shape on the same (detached) encoder features,
+    trained by its own Adam at the fixed critic_lr on every minibatch of every epoch, whatever
+    the policy's KL does, with its gradient clipped on its own. Why: at our 1-2k-transition
+    batches the KL rule holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a
+    shared critic never fits the returns (docs/results/README.md, the one-step PPO probe).
+    fan_in_lr_ref: ours, 0 (off) by default. > 0 scales the lr of each weight tensor by
+    min(1, fan_in_lr_ref / its fan-in) (rl/ppo.py fan_in_groups says why).
+    """
+
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip: float = 0.3
+    epochs: int = 8
+    minibatches: int = 1
+    lr: float = 3e-4
+    lr_min: float = 1e-6
+    lr_max: float = 1e-2
+    kl_target: float = 0.016
+    kl_stop_factor: float = 1.5
+    policy_coef: float = 0.5
+    value_coef: float = 2.0  # x 0.5 * (V - R)^2 in PPO.losses, as the authors' k_val
+    bound_coef: float = 0.02
+    bound_limit: float = 1.1
+    max_grad_norm: float = 1.0
+    separate_critic: bool = False
+    critic_lr: float = 3e-4
+    fan_in_lr_ref: int = 0
+
+
+@dc.dataclass
+class RunSettings:
+    """What every training run (train, distill) records about how it runs, whatever it learns:
+    its length, where its envs run, its seed, how often it checkpoints, its pretrained encoder
+    and the learner's device. TrainConfig and DistillConfig inherit these fields, so their
+    YAML keys stay flat (a run's config.yaml reads as before) and the two commands share one
+    set of flags (arguments/run_flags.py)."""
+    total_steps: int = 20_000  # environment steps (transitions) over all envs
+    workers: int = 0  # 0: envs in this process; > 0: Ray actors
+    envs_per_worker: int = 4
+    seed: int = 0
+    checkpoint_every: int = 5  # updates (train) or optimiser steps (distill) between checkpoints
+    ray_address: str = ""  # a Ray cluster's address; empty: a local Ray
+    # The pretrained encoder checkpoint the policy uses (train: frozen, for corn / pn / p2v-lite
+    # / rot; distill: the student's patch encoder starts from it).
+    encoder: str = ""
+    # Accept an encoder whose recorded pretraining metric is below its bar (the demo's tiny
+    # pretraining, smoke tests); recorded so evaluate accepts the run too.
+    allow_weak_encoder: bool = False
+    # Torch device of the learner (agent, batched inference, updates): "cpu", "cuda" or
+    # "cuda:N". Envs, observations and actions stay numpy on the CPU either way, and
+    # checkpoints hold CPU tensors, so a run may resume on another device.
+    device: str = "cpu"
+
+    def check_run_settings(self) -> None:
+        """InputError naming the first run setting no run can start with."""
+        for name in ("total_steps", "envs_per_worker", "checkpoint_every"):
+            if getattr(self, name) < 1:
+                raise InputError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.workers < 0:
+            raise InputError(f"workers must be >= 0, got {self.workers}")
+
+
+@dc.dataclass
+class TrainConfig(RunSettings):
+    policy: str = "state"
+    rollout_steps: int = 32  # per env and update
+    # Keep a copy of the checkpoint as checkpoints/step_NNNNNNNNN.pt each time training passes
+    # a multiple of this many env steps (0: none). last.pt is overwritten; the copies let a
+    # comparison evaluate every run at the same wall-clock (`evaluate --checkpoint`).
+    snapshot_every: int = 0
+    # A finished run whose trained agent (weights, log-std, observation normalisers) this run
+    # starts from, with a fresh optimiser, reward scaler and step count: a curriculum, e.g. the
+    # push teacher carried on to push_turn. Same policy, encoder and network shape; the
+    # source's log-std replaces init_log_std. Its env steps are not counted in this run's.
+    init_from: str = ""
+    # Initial log-std of the Gaussian policy: 0 as in the paper; the reduced benchmark starts
+    # lower, since at std 1 every step jitters the hand by most of max_position_delta and a
+    # run of a few 100k steps cannot shrink it (Adam moves it ~lr per optimiser step).
+    init_log_std: float = 0.0
+    # Normalise the encoder's features (corn/e2e tokens, the pn global feature) per dimension by
+    # a running mean/std before the policy head, as the context is. Ours, off by default (the
+    # authors normalise every non-constant observation by running statistics; whether that
+    # includes the embedding is not stated). Measured: the frozen tokens' attended features
+    # have per-dimension means larger than their spread; normalising them cut the policy's move
+    # under one sign step of lr 1e-5 from KL 0.031 to 0.019, not enough to change how PPO
+    # behaves, and no learning gain was measured (docs/results/README.md).
+    normalize_features: bool = False
+    ppo: PPOConfig = dc.field(default_factory=PPOConfig)
+    env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
+
+    def check(self) -> None:
+        """InputError naming the first field a run cannot start with (the env's too)."""
+        self.check_run_settings()
+        if self.rollout_steps < 1:
+            raise InputError(f"rollout_steps must be >= 1, got {self.rollout_steps}")
+        if self.snapshot_every < 0:
+            raise InputError(f"snapshot_every must be >= 0 (env steps between kept checkpoints; 0 "
+                             f"keeps none), got {self.snapshot_every}")
+        self.env.check()
+
+
+STUDENT_ACTIONS = ("mean", "sample")
+
+
+@dc.dataclass
+class DistillConfig(RunSettings):
+    teacher: str = ""  # the teacher's run folder (`corn-drake train --out`)
+    # Student parameter groups kept at their initial values (nn/student.PARAMETER_GROUPS).
+    frozen: typing.List[str] = dc.field(default_factory=list)
+    # Truncated BPTT: one optimiser step per window of this many steps of every env; the GRU
+    # state is carried (detached) from one window into the next.
+    window: int = 8
+    # Probability that an env executes the teacher's action instead of the student's at a
+    # step: beta_start at step 0, linearly down to 0 at beta_anneal_steps (0: never).
+    beta_start: float = 1.0
+    beta_anneal_steps: int = 10_000
+    # The student's own action when it acts: its Gaussian mean, or a sample of it.
+    student_action: str = "mean"
+    lr: float = 3e-4
+    max_grad_norm: float = 1.0
+    checkpoint_every: int = 50  # optimiser steps (windows)
+    log_every: int = 10  # windows per metrics row / TensorBoard point
+    env: StudentDiagramConfig = dc.field(default_factory=StudentDiagramConfig)
+
+    def check(self) -> None:
+        """InputError naming the first field a run cannot start with."""
+        self.check_run_settings()
+        for name in ("window", "log_every"):
+            if getattr(self, name) < 1:
+                raise InputError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("beta_anneal_steps",):
+            if getattr(self, name) < 0:
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 <= self.beta_start <= 1.0:
+            raise InputError(f"beta_start must be in [0, 1] (a probability), got {self.beta_start}")
+        if self.student_action not in STUDENT_ACTIONS:
+            raise InputError(f"student_action must be one of {', '.join(STUDENT_ACTIONS)}, got "
+                             f"{self.student_action!r}")
+        if not (self.lr > 0 and self.max_grad_norm > 0):
+            raise InputError(f"lr and max_grad_norm must be > 0, got {self.lr}, {self.max_grad_norm}")
+        self.env.check()
+
+    def beta(self, step: int) -> float:
+        """The teacher-action probability at env step `step`."""
+        if self.beta_anneal_steps == 0:
+            return 0.0
+        return self.beta_start * max(0.0, 1.0 - step / self.beta_anneal_steps)
