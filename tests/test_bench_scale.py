@@ -5,7 +5,6 @@
 import collections
 import json
 import math
-import time
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from corn_drake.cli import main
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.trainer import Trainer, to_cpu
+from tests.waiting import wait_until
 
 WORKERS, ENVS_PER_WORKER, ROLLOUT, UPDATES = [1, 2], 1, 4, 1
 NO_CUDA = pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
@@ -61,16 +61,18 @@ def test_scale_report_with_real_ray_workers_and_no_process_left(tmp_path):
         assert abs(sum(fractions.values()) - 1) < 1e-9
         assert math.isclose(run["learner_share"], 1 - fractions["env_step_wait"], rel_tol=1e-9)
         # The trainer's own per-update timer covers the same interval (plus the normaliser).
-        assert math.isclose(run["trainer_logged_steps_per_s"], run["steps_per_s"], rel_tol=0.3)
+        # Within a factor of 3, not a close tolerance: the part only one timer covers can be
+        # stretched by load from other processes; a rate from the wrong interval or the wrong
+        # step count is off by far more.
+        assert run["steps_per_s"] / 3 < run["trainer_logged_steps_per_s"] < 3 * run["steps_per_s"]
         assert run["worker_restarts"] == 0
     assert results["device"] == "cpu" and results["torch_threads"] == 1
     assert results["usable_cpus"] >= 1 and report["machine"]["cpu_count"] >= 1
     # Each run shut its Ray down: nothing it started is left (the reaper ends Ray's agents).
-    deadline = time.time() + 20
-    while _new_processes(before) and time.time() < deadline:
-        time.sleep(0.5)
-    left = [" ".join(p.cmdline())[:80] for p in _new_processes(before)]
-    assert not left, f"still running 20 s after the benchmark: {left}"
+    # They end on their own: wait for that however slow a busy machine is (the cap only
+    # guards against a hang: a process still there then outlived its run).
+    wait_until(lambda: not _new_processes(before), "the benchmark's Ray processes to end",
+               poll_s=0.5)
 
 
 def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch):
