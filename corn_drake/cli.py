@@ -11,6 +11,7 @@ import argparse
 import importlib
 import os
 import pkgutil
+import signal
 import sys
 
 from corn_drake import commands
@@ -47,9 +48,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived: the command stops where it is. A BaseException, like
+    KeyboardInterrupt, so no `except Exception` on the way up swallows it."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _interrupt(signum, frame):
+    raise Interrupted(signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     debug = args.debug or os.environ.get("CORN_DRAKE_DEBUG", "") not in ("", "0")
+    interrupted: list[int] = []
+
+    def on_signal(signum, frame):
+        interrupted.append(signum)
+        _interrupt(signum, frame)
+
+    handlers = _install(on_signal)
     try:
         return int(args._run(args) or 0)
     except InputError as e:
@@ -58,6 +79,50 @@ def main(argv: list[str] | None = None) -> int:
         # One line, like argparse's own errors: the user's input is wrong, not the program.
         print(f"{args._prog}: error: {e}", file=sys.stderr)
         return 2
+    except (Interrupted, KeyboardInterrupt, Exception) as e:
+        # An interrupt, or what it caused on the way out (a Ray worker that got the same
+        # SIGINT dies and ray.get raises): one line and 128 + the signal, as a shell reports it.
+        signum = (e.signum if isinstance(e, Interrupted) else signal.SIGINT
+                  if isinstance(e, KeyboardInterrupt) else interrupted[0] if interrupted else None)
+        if signum is None or debug:
+            raise
+        _stop_ray()
+        name = signal.Signals(signum).name
+        print(f"{args._prog}: interrupted ({name}): every checkpoint, shard, object or report "
+              "written so far is complete and kept; run the same command again to resume",
+              file=sys.stderr)
+        return 128 + int(signum)
+    finally:
+        _restore(handlers)
+
+
+def _stop_ray() -> None:
+    """Shuts a Ray this process started down before the one line is printed, so its workers
+    stop now and its core does not log about actors it loses at interpreter exit."""
+    ray = sys.modules.get("ray")
+    if ray is not None and ray.is_initialized():
+        try:
+            ray.shutdown()
+        except Exception:  # noqa: BLE001 - the interrupt is what the user must hear about
+            pass
+
+
+def _install(handler) -> dict:
+    """`handler` for SIGINT and SIGTERM (the main thread only: a notebook's worker thread
+    cannot set handlers), returning the previous ones."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, handler)
+    return previous
+
+
+def _restore(previous: dict) -> None:
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
 
 
 if __name__ == "__main__":

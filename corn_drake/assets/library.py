@@ -48,13 +48,38 @@ def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
     def array(key):
         return _load_array(library, obj, key)
 
-    return ObjectSpec(name=object_id, mass=float(obj.mass),
+    spec = ObjectSpec(name=object_id, mass=float(obj.mass),
                       unit_inertia=array("unit_inertia"), com=np.zeros(3),
                       cloud=array("cloud"),
                       stable_poses=array("stable_poses"), radius=float(obj.radius),
                       bbox_corners=array("bbox_corners"),
                       hull_paths=[library / h for h in obj.hulls],
                       visual_path=library / obj.visual, thin=bool(obj.thin))
+    _check_spec(spec, f"object {object_id!r} of {manifest_path(library)}")
+    return spec
+
+
+def _check_spec(spec: ObjectSpec, where: str) -> None:
+    """InputError naming the object and its manifest for values no simulation can use (a
+    hand-edited or damaged library): Drake would fail on them deep inside the plant, naming
+    neither, and only when that object's turn came."""
+    if not (np.isfinite(spec.mass) and spec.mass > 0):
+        raise InputError(f"{where}: mass must be a finite number > 0, got {spec.mass}")
+    if not (np.isfinite(spec.radius) and spec.radius > 0):
+        raise InputError(f"{where}: radius must be a finite number > 0, got {spec.radius}")
+    inertia = np.asarray(spec.unit_inertia, float)
+    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)) or \
+            np.any(np.linalg.eigvalsh((inertia + inertia.T) / 2) <= 0):
+        raise InputError(f"{where}: unit_inertia must be a finite positive-definite 3 x 3 matrix")
+    poses = np.asarray(spec.stable_poses)
+    if poses.ndim != 2 or poses.shape[1] != 7 or len(poses) == 0 or not np.all(np.isfinite(poses)):
+        raise InputError(f"{where}: stable_poses must be finite (n >= 1, 7) rows, got shape "
+                         f"{poses.shape}")
+    if not np.all(np.isfinite(spec.cloud)):
+        raise InputError(f"{where}: its cloud holds NaN or infinite values")
+    for path in [*spec.hull_paths, spec.visual_path]:
+        if not Path(path).is_file() or Path(path).stat().st_size == 0:
+            raise MissingInputError(f"{where}: mesh file missing or empty: {path}")
 
 
 def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:

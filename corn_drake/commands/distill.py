@@ -126,7 +126,11 @@ def run(args) -> int:
 
     if not run_config_path(args.out).is_file() and args.teacher is None:
         raise InputError("--teacher is required for a new run (the teacher's run folder)")
-    with ResumableRun.open(args.out, DistillConfig, resume_required=args.resume) as run_folder:
+    def check_new():  # a new run's own argument errors, named before a folder it cannot take
+        requested_config(args, None, load_teacher(args.teacher)[0])
+
+    with ResumableRun.open(args.out, DistillConfig, resume_required=args.resume,
+                           check_new=check_new) as run_folder:
         recorded = run_folder.recorded
         teacher_cfg, teacher = load_teacher(args.teacher or recorded.teacher)
         cfg = requested_config(args, recorded, teacher_cfg)

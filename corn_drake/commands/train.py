@@ -90,23 +90,17 @@ def requested_config(args, recorded):
 def run(args) -> int:
     from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.device import training_device
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.rl.trainer import Trainer
     from corn_drake.run_folders.resumable import ResumableRun
 
-    with ResumableRun.open(args.out, TrainConfig, resume_required=args.resume) as run_folder:
-        cfg = requested_config(args, run_folder.recorded)
-        if cfg.env.scene.object.cycles_library:
-            from corn_drake.rl.vec_env import library_train_ids
+    def check_new():  # a new run's own argument errors, named before a folder it cannot take
+        checked_config(requested_config(args, None), args, new_run=True)
 
-            library_train_ids(cfg.env.scene.object.library)  # a bad library fails here
-        check_config(cfg)  # a value no run or episode can be built from, before any write
-        if cfg.init_from and run_folder.is_new:
-            from corn_drake.rl.checkpoints import check_init_source
-
-            cfg = check_init_source(cfg, take_policy=args.policy is None)  # and its encoder
-        training_device(cfg.device, argument_of_field("device"))  # e.g. cuda on a CPU machine
+    with ResumableRun.open(args.out, TrainConfig, resume_required=args.resume,
+                           check_new=check_new) as run_folder:
+        cfg = checked_config(requested_config(args, run_folder.recorded), args,
+                             new_run=run_folder.is_new)
         run_folder.refuse_changes(cfg, may_grow=RESUME_MAY_GROW, may_change=RESUME_MAY_CHANGE,
                                   name=argument_of_field)
         encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
@@ -119,20 +113,37 @@ def run(args) -> int:
     return 0
 
 
+def checked_config(cfg, args, new_run: bool):
+    """`cfg` refused for anything no run can start with, before any write: a library with a
+    broken object, a value out of its bounds, an --init-from source that does not fit, a device
+    this machine lacks. A new run from --init-from takes the source's policy and encoder."""
+    from corn_drake.rl.device import training_device
+
+    if cfg.env.scene.object.cycles_library:
+        from corn_drake.rl.vec_env import library_train_ids
+
+        library_train_ids(cfg.env.scene.object.library)  # every train object loaded and checked
+    check_config(cfg)
+    if cfg.init_from and new_run:
+        from corn_drake.rl.checkpoints import check_init_source
+
+        cfg = check_init_source(cfg, take_policy=args.policy is None)  # and its encoder
+    training_device(cfg.device, argument_of_field("device"))  # e.g. cuda on a CPU machine
+    return cfg
+
+
 def check_config(cfg) -> None:
-    """cfg.check(), its error naming the train argument behind the field where it names one."""
+    """cfg.check() (the bounds every config declares, config/bounds.py, and what no episode can
+    be built from), its error naming the train argument behind the field it names."""
     from corn_drake.errors import InputError
 
     try:
         cfg.check()
     except InputError as e:
-        field = str(e).split(" ", 1)[0]
-        flag = flag_of_field(field, SHORTCUTS)
-        if flag is None and field == "snapshot_every":
-            flag = "--set snapshot_every"
-        if flag is None:
+        field, _, rest = str(e).partition(" ")
+        if not rest.startswith("must "):  # a message that names no single field
             raise
-        raise InputError(f"{flag}: {e}") from None
+        raise InputError(f"{argument_of_field(field)}: {e}") from None
 
 
 def argument_of_field(field: str) -> str:

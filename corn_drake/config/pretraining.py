@@ -3,17 +3,25 @@
 
 The optimisation fields have the same names in both (the loop in pretraining/loop.py reads
 either); the pretext defaults differ by model (PRETEXT_DEFAULTS), so `pretext_config(model)` is
-how a pretext config is made. No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+how a pretext config is made. No `from __future__ import annotations`: yaml_load_typed needs
+real types on the fields.
 """
 
 import dataclasses as dc
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.errors import InputError
 
 
 @dc.dataclass
 class PretrainConfig:
     """Contact pretraining (paper: AdamW 2e-4, wd 5e-4, batch 1024, cosine schedule + warm-up)."""
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"steps": ">= 1",
+              "batch_size": ">= 1", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
+              "warmup_steps": ">= 0", "max_grad_norm": "> 0", "translate_std": ">= 0",
+              "point_noise_std": ">= 0", "eval_every": ">= 1", "checkpoint_every": ">= 1",
+              "eval_samples": ">= 1", "seed": ">= 0"}
     model: str = "corn"  # corn | pointnet
     steps: int = 2000
     batch_size: int = 1024
@@ -36,6 +44,14 @@ PRETEXT_MODELS = ("p2v-lite", "rot")
 
 @dc.dataclass
 class PretextConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"steps": ">= 1",
+              "batch_size": ">= 1", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
+              "warmup_steps": ">= 0", "max_grad_norm": "> 0", "dropout": "[0, 1)",
+              "point_noise_std": ">= 0", "mask_ratio": "(0, 1)", "smooth_l1_beta": "> 0",
+              "ema_start_horizon": "> 0", "ema_end_horizon": "> 0", "ema_ramp_fraction": "(0, 1]",
+              "eval_every": ">= 1", "checkpoint_every": ">= 1", "eval_samples": ">= 1",
+              "seed": ">= 0"}
     model: str = "p2v-lite"  # p2v-lite | rot
     steps: int = 2000
     batch_size: int = 512  # point2vec's
@@ -75,6 +91,7 @@ class PretextConfig:
 
     def check(self) -> None:
         """InputError naming the first field no run can use."""
+        check_bounds(self)
         if self.model not in PRETEXT_MODELS:
             raise InputError(f"pretext model must be one of {PRETEXT_MODELS}, got {self.model!r}")
         if not 0 < self.mask_ratio < 1:

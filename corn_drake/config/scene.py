@@ -29,6 +29,11 @@ def _plant_config() -> MultibodyPlantConfig:
 
 @dc.dataclass
 class PhysicsConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {
+              "policy_period": "> 0", "object_hydroelastic_modulus": "> 0",
+              "table_hydroelastic_modulus": "> 0", "table_resolution_hint": "> 0",
+              "object_hunt_crossley_dissipation": ">= 0"}
     # Drake's own plant settings (time step, contact model and approximation, ...), passed as
     # they are to AddMultibodyPlant (scene/builder.py). In YAML: physics: {plant: {...}}.
     plant: MultibodyPlantConfig = dc.field(default_factory=_plant_config)
@@ -73,6 +78,9 @@ LIBRARY_OBJECTS = ("one", "train")
 
 @dc.dataclass
 class ObjectConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"radius": "> 0",
+              "length": "> 0", "mass": "> 0", "cloud_points": ">= 1"}
     # "box" | "cylinder": a primitive built in code; "library": objects from a library folder.
     kind: str = "box"
     size: list[float] = dc.field(default_factory=lambda: [0.09, 0.07, 0.05])  # box x,y,z
@@ -118,6 +126,11 @@ class ObjectConfig:
 
 @dc.dataclass
 class RandomizationConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"mass": "range > 0",
+              "object_friction": "range >= 0", "table_friction": "range >= 0",
+              "finger_friction": "range >= 0", "restitution": "range [0, 1]",
+              "torque_noise_std": ">= 0"}
     enabled: bool = True
     mass: list[float] = dc.field(default_factory=lambda: [0.1, 0.5])
     # Rescale each episode's object to a radius (m) drawn from [low, high]; absent (null), the
@@ -143,6 +156,11 @@ class RandomizationConfig:
 
 @dc.dataclass
 class ControllerConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {
+              "max_position_delta": "> 0", "max_rotation_delta": "> 0", "kp_range": "range > 0",
+              "rho_range": "range >= 0", "ik_damping": ">= 0", "ee_clamp": "> 0",
+              "object_margin": ">= 0"}
     max_position_delta: float = 0.06  # m, residual EE translation at |a| = 1
     max_rotation_delta: float = 0.1  # rad, residual axis-angle at |a| = 1
     kp_range: list[float] = dc.field(default_factory=lambda: [10.0, 200.0])

@@ -7,7 +7,8 @@ in YAML by a tag on `task.goal`:
 
 Each variant holds only its own ranges; an untagged `goal:` mapping is the first variant
 (Full6dGoal, the paper's task). corn_drake/tasks/sampling.py draws an episode's object start
-and goal for each. No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+and goal for each. No `from __future__ import annotations`: yaml_load_typed needs real types
+on the fields.
 """
 
 import dataclasses as dc
@@ -58,6 +59,12 @@ GoalSpec = typing.Union[Full6dGoal, PlanarGoal, PushFromHandGoal]
 
 @dc.dataclass
 class TaskConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {
+              "episode_steps": ">= 1", "success_position": "> 0", "success_orientation": "> 0",
+              "robot_init_noise": ">= 0", "keypoint_k1": ">= 0", "keypoint_k2": ">= 0",
+              "hand_k1": ">= 0", "hand_clip": ">= 0", "potential_gamma": "(0, 1]",
+              "success_reward": ">= 0", "energy_coef": ">= 0"}
     # The task's name, reported by `evaluate` and in a run's config (diagrams/tasks/NAME.yaml).
     name: str = "full6d"
     episode_steps: int = 300

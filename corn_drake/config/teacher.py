@@ -5,6 +5,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 
 import dataclasses as dc
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.config.scene import ControllerConfig, RandomizationConfig, SceneConfig
 from corn_drake.config.task import TaskConfig
 
@@ -21,6 +22,7 @@ class TeacherDiagramConfig:
         """InputError naming the first field no episode could be built from (object, size
         randomization, task ranges). Commands call it before they write a run's config, so a
         bad value is refused up front instead of failing the run at its first reset."""
+        check_bounds(self)
         self.scene.object.check()
         self.randomization.check()
         self.task.check()

@@ -7,6 +7,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 import typing
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.errors import InputError
@@ -37,6 +38,13 @@ class PPOConfig:
     fan_in_lr_ref: ours, 0 (off) by default. > 0 scales the lr of each weight tensor by
     min(1, fan_in_lr_ref / its fan-in) (rl/ppo.py fan_in_groups says why).
     """
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"gamma": "(0, 1]",
+              "gae_lambda": "[0, 1]", "clip": "> 0", "epochs": ">= 1", "minibatches": ">= 1",
+              "lr": "> 0", "lr_min": "> 0", "lr_max": "> 0", "kl_target": "> 0",
+              "kl_stop_factor": "> 0", "policy_coef": ">= 0", "value_coef": ">= 0",
+              "bound_coef": ">= 0", "bound_limit": "> 0", "max_grad_norm": "> 0",
+              "critic_lr": "> 0", "fan_in_lr_ref": ">= 0"}
 
     gamma: float = 0.99
     gae_lambda: float = 0.95
@@ -64,7 +72,11 @@ class RunSettings:
     its length, where its envs run, its seed, how often it checkpoints, its pretrained encoder
     and the learner's device. TrainConfig and DistillConfig inherit these fields, so their
     YAML keys stay flat (a run's config.yaml reads as before) and the two commands share one
-    set of flags (arguments/run_flags.py)."""
+    set of flags (arguments/run_flags.py) and bounds."""
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {
+              "total_steps": ">= 1", "workers": ">= 0", "envs_per_worker": ">= 1", "seed": ">= 0",
+              "checkpoint_every": ">= 1"}
     total_steps: int = 20_000  # environment steps (transitions) over all envs
     workers: int = 0  # 0: envs in this process; > 0: Ray actors
     envs_per_worker: int = 4
@@ -82,17 +94,12 @@ class RunSettings:
     # checkpoints hold CPU tensors, so a run may resume on another device.
     device: str = "cpu"
 
-    def check_run_settings(self) -> None:
-        """InputError naming the first run setting no run can start with."""
-        for name in ("total_steps", "envs_per_worker", "checkpoint_every"):
-            if getattr(self, name) < 1:
-                raise InputError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.workers < 0:
-            raise InputError(f"workers must be >= 0, got {self.workers}")
-
 
 @dc.dataclass
 class TrainConfig(RunSettings):
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {
+              "rollout_steps": ">= 1", "snapshot_every": ">= 0", "init_log_std": "[-20, 5]"}
     policy: str = "state"
     rollout_steps: int = 32  # per env and update
     # Keep a copy of the checkpoint as checkpoints/step_NNNNNNNNN.pt each time training passes
@@ -121,12 +128,7 @@ class TrainConfig(RunSettings):
 
     def check(self) -> None:
         """InputError naming the first field a run cannot start with (the env's too)."""
-        self.check_run_settings()
-        if self.rollout_steps < 1:
-            raise InputError(f"rollout_steps must be >= 1, got {self.rollout_steps}")
-        if self.snapshot_every < 0:
-            raise InputError(f"snapshot_every must be >= 0 (env steps between kept checkpoints; 0 "
-                             f"keeps none), got {self.snapshot_every}")
+        check_bounds(self)
         self.env.check()
 
 
@@ -135,6 +137,10 @@ STUDENT_ACTIONS = ("mean", "sample")
 
 @dc.dataclass
 class DistillConfig(RunSettings):
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"window": ">= 1",
+              "beta_start": "[0, 1]", "beta_anneal_steps": ">= 0", "lr": "> 0",
+              "max_grad_norm": "> 0", "log_every": ">= 1"}
     teacher: str = ""  # the teacher's run folder (`corn-drake train --out`)
     # Student parameter groups kept at their initial values (nn/student.PARAMETER_GROUPS).
     frozen: typing.List[str] = dc.field(default_factory=list)
@@ -155,20 +161,10 @@ class DistillConfig(RunSettings):
 
     def check(self) -> None:
         """InputError naming the first field a run cannot start with."""
-        self.check_run_settings()
-        for name in ("window", "log_every"):
-            if getattr(self, name) < 1:
-                raise InputError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("beta_anneal_steps",):
-            if getattr(self, name) < 0:
-                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not 0.0 <= self.beta_start <= 1.0:
-            raise InputError(f"beta_start must be in [0, 1] (a probability), got {self.beta_start}")
+        check_bounds(self)
         if self.student_action not in STUDENT_ACTIONS:
             raise InputError(f"student_action must be one of {', '.join(STUDENT_ACTIONS)}, got "
                              f"{self.student_action!r}")
-        if not (self.lr > 0 and self.max_grad_norm > 0):
-            raise InputError(f"lr and max_grad_norm must be > 0, got {self.lr}, {self.max_grad_norm}")
         self.env.check()
 
     def beta(self, step: int) -> float:

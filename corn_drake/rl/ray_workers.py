@@ -8,6 +8,8 @@ start new episodes, the step reports them as truncated with no bootstrap (final_
 
 from __future__ import annotations
 
+import signal
+import threading
 import dataclasses
 
 import numpy as np
@@ -42,12 +44,20 @@ def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
     """
     if ray.is_initialized():
         return
-    if address:
-        ray.init(address=address, log_to_driver=False)
-        return
-    before = _child_pids()
-    ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
-    _start_reaper(sorted(_child_pids() - before))
+    # ray.init installs its own SIGINT/SIGTERM handlers (SIGTERM: a native stack dump and exit
+    # 134); the ones the command line set (cli.py: one line, exit 130 / 143) are put back.
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        if address:
+            ray.init(address=address, log_to_driver=False)
+            return
+        before = _child_pids()
+        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+        _start_reaper(sorted(_child_pids() - before))
+    finally:
+        for sig, handler in handlers.items():
+            if callable(handler) and threading.current_thread() is threading.main_thread():
+                signal.signal(sig, handler)
 
 
 # The running reaper; holding it keeps our end of its stdin pipe open until this process dies.

@@ -46,12 +46,16 @@ def cycle_object(ids: list[str], seed: int, index: int, episode: int, num_envs: 
 
 
 def library_train_ids(library: str) -> list[str]:
-    """The train objects of an object library; none is an error (nothing to train on)."""
-    from corn_drake.assets.library import list_objects
+    """The train objects of an object library, each loaded and checked (its files exist and
+    load, mass, inertia and poses are usable), so a broken object is named before a run writes
+    anything instead of when its turn comes, hours in; no train object is an error too."""
+    from corn_drake.assets.library import list_objects, load_object_spec
 
     ids = list_objects(library, "train")
     if not ids:
         raise InputError(f"object library {library} has no train objects")
+    for object_id in ids:
+        load_object_spec(library, object_id)
     return ids
 
 

@@ -14,6 +14,7 @@ that can refuse comes before the first write, so a refused resume leaves the run
 from __future__ import annotations
 
 import dataclasses
+import os
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -22,7 +23,26 @@ from corn_drake.config.loader import load_config
 from corn_drake.config.overrides import config_changes
 from corn_drake.errors import InputError
 from corn_drake.run_folders.config_file import run_config_path, write_run_config
-from corn_drake.run_folders.guards import lock_folder, refuse_config_changes
+from corn_drake.run_folders.guards import LOCK_NAME, lock_folder, refuse_config_changes
+
+
+def _other_folder(out: Path) -> list[str]:
+    """What `out` holds besides a lock, when it is a folder with no run config; else []."""
+    if not out.is_dir() or run_config_path(out).is_file():
+        return []
+    return sorted(name for name in os.listdir(out) if name != LOCK_NAME)
+
+
+def refuse_other_folder(out: Path) -> None:
+    """InputError when `out` is a folder that holds something but no run (no config.yaml): an
+    object library, a folder of notes. Taking it over would add config.yaml, checkpoints/ and
+    tb/ to it and overwrite its lock file. Checked before the lock is taken, so nothing of it
+    changes. An empty folder, or one holding only a lock a killed new run left, is fine."""
+    found = _other_folder(out)
+    if found:
+        shown = ", ".join(found[:5]) + (f" and {len(found) - 5} more" if len(found) > 5 else "")
+        raise InputError(f"--out {out} is not a run folder (no {run_config_path(out).name}) and "
+                         f"not empty: it holds {shown}; give a new or empty folder")
 
 
 @dataclasses.dataclass
@@ -32,18 +52,23 @@ class ResumableRun:
 
     @classmethod
     @contextmanager
-    def open(cls, out: str | Path, schema: type, resume_required: bool = False
-             ) -> Iterator["ResumableRun"]:
+    def open(cls, out: str | Path, schema: type, resume_required: bool = False,
+             check_new: Callable[[], Any] | None = None) -> Iterator["ResumableRun"]:
         """Locks `out` and reads the config it records, if any, as `schema`. With
-        `resume_required`, a folder that holds no run is refused (a mistyped --out)."""
+        `resume_required`, a folder that holds no run is refused (a mistyped --out). A folder
+        that holds something else is refused before it is locked; `check_new()` (the new run's
+        own argument checks) runs first, so a mistyped argument is named before the folder."""
         out = Path(out)
+        path = run_config_path(out)
+        if resume_required and not path.is_file():
+            raise InputError(f"--resume: {out} holds no run to resume (no {path.name}); "
+                             "leave --resume off to start one")
+        if _other_folder(out):
+            if check_new is not None:
+                check_new()
+            refuse_other_folder(out)
         with lock_folder(out):
-            path = run_config_path(out)
-            recorded = load_config(schema, path) if path.is_file() else None
-            if resume_required and recorded is None:
-                raise InputError(f"--resume: {out} holds no run to resume (no {path.name}); "
-                                 "leave --resume off to start one")
-            yield cls(out, recorded)
+            yield cls(out, load_config(schema, path) if path.is_file() else None)
 
     @property
     def is_new(self) -> bool:
