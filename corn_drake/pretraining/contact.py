@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.config.pretraining import PretrainConfig
 from corn_drake.contact.shards import load_split
 from corn_drake.storage.atomic_files import atomic_path
@@ -73,6 +74,7 @@ class Pretrainer(PretrainLoop):
     def __init__(self, cfg: PretrainConfig, data: str | Path, out: str | Path):
         if cfg.model not in ("corn", "pointnet"):
             raise ValueError(f"model must be corn or pointnet, got {cfg.model!r}")
+        check_bounds(cfg)  # a config made in code gets the same range checks as a loaded one
         self.data = Path(data)
         super().__init__(cfg, out)
 
