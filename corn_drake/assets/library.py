@@ -9,6 +9,7 @@ whole manifest at every save.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 import zlib
 from pathlib import Path
@@ -139,21 +140,66 @@ def _no_pose_reason(fields: dict) -> str:
 def _add(out: Path, manifest: Manifest, entry: LibraryObject, rng, mesh, convex, cfg,
          cache) -> None:
     """Processes `entry`'s mesh; appends the object, or its rejection, to `manifest`."""
+    _append(manifest, _processed(out, entry, rng, mesh, convex, cfg, cache))
+
+
+def _append(manifest: Manifest, result: LibraryObject | Rejection) -> None:
+    (manifest.rejected if isinstance(result, Rejection) else manifest.objects).append(result)
+
+
+def _processed(out: Path, entry: LibraryObject, rng, mesh, convex, cfg,
+               cache) -> LibraryObject | Rejection:
+    """`entry` with its processed mesh's fields (its files written under `out`), or its
+    rejection."""
     try:
         fields = process_object(mesh, entry.id, out, rng, cfg, convex, cache)
     except Rejected as e:
-        manifest.rejected.append(Rejection(entry.source, str(e)))
-        return
+        return Rejection(entry.source, str(e))
     if fields["num_stable_poses"] == 0:
-        manifest.rejected.append(Rejection(entry.source, _no_pose_reason(fields)))
-        return
+        return Rejection(entry.source, _no_pose_reason(fields))
     # Warnings from loading the file (ingest) come first, then those from processing it.
     warnings = entry.warnings + fields["warnings"]
-    manifest.objects.append(dataclasses.replace(entry, **{**fields, "warnings": warnings}))
+    return dataclasses.replace(entry, **{**fields, "warnings": warnings})
+
+
+def _build_planned(out: Path, seed: int, cfg: ProcessConfig,
+                   entry_plan: LibraryObject) -> LibraryObject | Rejection:
+    """One planned procedural object built into `out`: its manifest entry or its rejection. It
+    depends on (seed, its id) only, so any process may build it (objects --workers)."""
+    object_id, family = entry_plan.id, entry_plan.family
+    obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
+    rng = np.random.default_rng(obj_seed)
+    entry = LibraryObject(id=object_id, source=f"procedural:{family}:{obj_seed}", family=family)
+    try:
+        mesh = make_family_mesh(family, obj_seed)
+    except ValueError as e:
+        return Rejection(entry.source, str(e))
+    return _processed(out, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
+
+
+def _in_plan_order(build, todo: list, workers: int):
+    """build(item) for each item of `todo`, yielded in `todo`'s order (so the manifest lists the
+    objects as a serial build does), in `workers` processes. Spawned, not forked: a fork of a
+    process holding Drake's and torch's threads can deadlock."""
+    if workers <= 1 or len(todo) <= 1:
+        yield from map(build, todo)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+                               mp_context=multiprocessing.get_context("spawn"))
+    try:
+        yield from pool.map(build, todo)
+    finally:
+        # An error or an interrupt: objects not started are dropped; each finished one was
+        # saved as it came, so the same command resumes after the last saved object.
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
-                     progress: bool = True, split: str | None = None) -> Manifest:
+                     progress: bool = True, split: str | None = None,
+                     workers: int = 1) -> Manifest:
     """Builds (or resumes) the procedural library of `num` objects at `seed` in `out`.
 
     `split` ("train" or "unseen") builds only the objects of that split of the full build, each
@@ -161,7 +207,9 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
     their split is the full build's, computed over all `num` planned objects. That holds while
     no other object of their family is rejected (none of the 80 at seed 0 is): a rejection shrinks
     the family, which a full build would split anew. Building the rest later (the same command
-    without `split`) completes the library."""
+    without `split`) completes the library. `workers` processes build objects side by side; the
+    library is the same as a serial build's (each object depends on (seed, id) only, and the
+    manifest lists them in plan order)."""
     from tqdm import tqdm
 
     out, cfg = Path(out), cfg or ProcessConfig()
@@ -177,20 +225,15 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
     out.mkdir(parents=True, exist_ok=True)
     manifest = _load_or_new(out)
     done = {o.id for o in manifest.objects} | {r.source for r in manifest.rejected}
+    todo = [o for o in planned
+            if o.id not in done and (wanted is None or o.id in wanted)]
     t0 = time.perf_counter()
-    for entry_plan in tqdm(planned, disable=not progress, desc="objects"):
-        object_id, family = entry_plan.id, entry_plan.family
-        if object_id in done or (wanted is not None and object_id not in wanted):
-            continue
-        obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
-        rng = np.random.default_rng(obj_seed)
-        entry = LibraryObject(id=object_id, source=f"procedural:{family}:{obj_seed}", family=family)
-        try:
-            mesh = make_family_mesh(family, obj_seed)
-        except ValueError as e:
-            manifest.rejected.append(Rejection(entry.source, str(e)))
-            continue
-        _add(out, manifest, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
+    build = functools.partial(_build_planned, out, seed, cfg)
+    # The bar counts only the objects still to build, so its rate and ETA hold on a resume or
+    # a --split build.
+    for result in tqdm(_in_plan_order(build, todo, workers), total=len(todo),
+                       disable=not progress, desc="objects"):
+        _append(manifest, result)
         _save(out, manifest, seed, plan)  # after every object: a killed run resumes here
     manifest.timings["build_s"] = manifest.timings.get("build_s", 0.0) + time.perf_counter() - t0
     _save(out, manifest, seed, plan)

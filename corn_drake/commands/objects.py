@@ -29,6 +29,9 @@ def add_arguments(parser):
                              "--num build, identical to theirs (e.g. the unseen objects to "
                              "evaluate shipped weights on); the same command without --split "
                              "completes the library later")
+    parser.add_argument("--workers", type=positive_int, default=1,
+                        help="procedural only: processes building objects side by side (the "
+                             "library is the same as with 1)")
     parser.add_argument("--out", required=True)
     parser.add_argument("--no-progress", action="store_true")
 
@@ -91,7 +94,7 @@ def run(args) -> int:
         resume_arguments(args.out, output_arguments(args), may_grow=("--num",))
         if args.source == "procedural":
             manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress,
-                                        args.split)
+                                        args.split, workers=args.workers)
         else:
             manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
     print(_split_summary(manifest.objects) + f", {len(manifest.rejected)} rejected; "
