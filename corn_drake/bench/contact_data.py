@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from corn_drake.arguments.value_types import positive_int
 
 NAME = "contact-data"
@@ -36,6 +34,8 @@ def _objects(path):
 
 def _numpy_baseline(objects, n, rng, sdf):
     """Reference path: float64 numpy, SDF + gradient at every point, labels by tool-frame test."""
+    import numpy as np
+
     from corn_drake.contact.generate import random_rotations
 
     which = rng.integers(len(objects), size=n)
@@ -53,6 +53,8 @@ def _numpy_baseline(objects, n, rng, sdf):
 
 
 def run(args) -> dict:
+    import numpy as np
+
     from corn_drake.contact.generate import generate_samples, shard_rng
     from corn_drake.contact.gripper_sdf import GripperSDF
 

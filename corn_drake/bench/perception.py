@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-from tqdm import tqdm
-
 from corn_drake.arguments.value_types import positive_int
 
 NAME = "perception"
@@ -31,6 +28,9 @@ def add_arguments(parser):
 
 
 def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
+    import numpy as np
+    from tqdm import tqdm
+
     from corn_drake.builders.perception_harness import PerceptionHarness, slide_and_turn_poses
 
     harness = PerceptionHarness(cfg)

@@ -20,11 +20,8 @@ import io
 import pstats
 import time
 
-import numpy as np
-
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
-from corn_drake.bench.episode_plans import random_action_plans, run_plans
 from corn_drake.errors import InputError
 from corn_drake.rl.policy_kinds import POLICY_KINDS
 
@@ -55,6 +52,8 @@ def add_arguments(parser):
 
 def _record(env, plans):
     """Untimed pass: per episode the DR sample, initial state and per-physics-step torques."""
+    import numpy as np
+
     clock, h = env.clock, env.clock.time_step
     ctrl = env.handles.controller
     recorded = []
@@ -78,6 +77,8 @@ def _record(env, plans):
 
 
 def _run_bare(env, recorded):
+    import numpy as np
+
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
@@ -128,11 +129,15 @@ def check_replayable(cfg) -> None:
 def bare_physics_rate(env, steps: int, seed: int) -> float:
     """Policy steps/s of the bare plant of `env`'s scene, replaying the torques of `steps`
     random-action policy steps recorded on `env` (untimed) from the same initial states."""
+    from corn_drake.bench.episode_plans import random_action_plans
+
     elapsed, _ = _run_bare(env, _record(env, random_action_plans(env, steps, seed)))
     return steps / elapsed
 
 
 def _profile_env(env, plans) -> list[str]:
+    from corn_drake.bench.episode_plans import run_plans
+
     profiler = cProfile.Profile()
     profiler.enable()
     run_plans(env, plans)
@@ -196,6 +201,7 @@ def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -
     """Bare-physics policy steps/s of `env`'s physics and of the same scene under `base_cfg`'s,
     each replaying its own recording of the same action plans; the two alternate `repeats`
     times and the best of each is kept (the least disturbed by other load)."""
+    from corn_drake.bench.episode_plans import random_action_plans
     from corn_drake.rl.env import TeacherEnv
 
     baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
@@ -223,6 +229,9 @@ def _physics_summary(physics) -> dict:
 
 
 def run(args) -> dict:
+    import numpy as np
+
+    from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.rl.env import TeacherEnv
 
     if args.policy and args.envs < args.workers:

@@ -25,7 +25,7 @@ HELP = ("student env steps/s with rendering and the full perception chain, vs th
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.config.choices import SEGMENTATION_MODES
 
     parser.add_argument("--steps", type=positive_int, default=40,
                         help="policy steps per measurement (default 40: well under a minute here)")

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-from tqdm import tqdm
-
 from corn_drake.arguments.value_types import positive_float
 from corn_drake.errors import InputError
 
@@ -43,6 +40,9 @@ def add_arguments(parser):
 
 
 def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = True) -> dict:
+    import numpy as np
+    from tqdm import tqdm
+
     from corn_drake.config.diagram_files import load_student_config
     from corn_drake.builders.perception_harness import (PerceptionHarness, slide_and_turn_poses,
                                                         track_sequence)

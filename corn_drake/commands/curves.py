@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.storage.atomic_files import read_json
 
 NAME = "curves"
 HELP = "plot success rate and return of several training runs on one figure"
@@ -44,6 +43,7 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
     """(label, history rows) of one training run; a clear error when it has neither file."""
     checkpoint = run_dir / "checkpoints" / "last.pt"
     metrics = run_dir / "metrics.json"
+    from corn_drake.storage.atomic_files import read_json
     from corn_drake.storage.checkpoint_files import load_checkpoint
 
     state = load_checkpoint(checkpoint, required=("history",))  # prev.pt if last.pt is unreadable
@@ -67,6 +67,8 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
 
 def benchmarked_rates(path: str) -> dict[str, float]:
     """policy -> training steps/s of a `corn-drake bench policies` report."""
+    from corn_drake.storage.atomic_files import read_json
+
     report = read_json(path, "bench policies report")
     is_policies = isinstance(report, dict) and report.get("benchmark") == "policies"
     rates = report.get("results", {}).get("train_steps_per_s") if is_policies else None

@@ -26,8 +26,8 @@ RESUME_MAY_CHANGE = (*RESUME_MAY_CHANGE, "log_every")
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
-    from corn_drake.config.training import STUDENT_ACTIONS
+    from corn_drake.config.choices import SEGMENTATION_MODES
+    from corn_drake.config.choices import STUDENT_ACTIONS
 
     add_run_arguments(parser, NAME, encoder_help="contact-pretrained CORN encoder for the "
                                                  "student (default: the teacher run's encoder)")

@@ -36,7 +36,7 @@ REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
     parser.add_argument("--run", required=True,

@@ -7,6 +7,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 import typing
 
+from corn_drake.config.choices import STUDENT_ACTIONS
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.errors import InputError
@@ -128,9 +129,6 @@ class TrainConfig(RunSettings):
             raise InputError(f"snapshot_every must be >= 0 (env steps between kept checkpoints; 0 "
                              f"keeps none), got {self.snapshot_every}")
         self.env.check()
-
-
-STUDENT_ACTIONS = ("mean", "sample")
 
 
 @dc.dataclass
