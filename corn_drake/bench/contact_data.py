@@ -17,8 +17,10 @@ HELP = "contact-data generation speed (samples/s) vs the plain numpy path"
 
 def add_arguments(parser):
     parser.add_argument("--objects", default="", help="object library (default: built-in primitives)")
-    parser.add_argument("--samples", type=positive_int, default=16384)
-    parser.add_argument("--batch", type=positive_int, default=4096)
+    parser.add_argument("--samples", type=positive_int, default=16384,
+                        help="samples generated in the timed run")
+    parser.add_argument("--batch", type=positive_int, default=4096,
+                        help="samples per generation call")
 
 
 def _objects(path):

@@ -21,6 +21,7 @@ import pstats
 import time
 
 from corn_drake import DIAGRAMS_DIR
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
 from corn_drake.errors import InputError
 from corn_drake.rl.policy_kinds import POLICY_KINDS
@@ -34,20 +35,29 @@ HELP = "TeacherEnv policy steps/s with random actions vs bare physics of the sam
 def add_arguments(parser):
     parser.add_argument("--steps", type=positive_int, default=600,
                         help="policy steps per measurement")
-    parser.add_argument("--config", default=None, help="teacher diagram YAML (default: diagrams/teacher_rollout.yaml)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--task", default=None,
+                        help="task overlay: a name in diagrams/tasks/ or a YAML file, as `train "
+                             "--task` (default: the base diagram, the paper's 6D task)")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the episodes and their random actions")
     parser.add_argument("--repeats", type=positive_int, default=3,
                         help="alternating env / bare-physics runs; the fastest of each is kept")
     parser.add_argument("--policy", default=None, choices=POLICY_KINDS,
-                        help="also measure with this policy (randomly initialised) in the loop")
-    parser.add_argument("--envs", type=positive_int, default=8,
-                        help="envs in the policy-in-the-loop runs")
+                        help="also measure with this policy (randomly initialised) in the loop "
+                             "(default: none, random actions only)")
     parser.add_argument("--workers", type=positive_int, default=2,
-                        help="Ray workers in the Ray run")
+                        help="Ray workers in the policy-in-the-loop Ray run")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=4,
+                        help="envs each Ray worker steps; the in-process run steps all of "
+                             "them (workers x envs per worker) in one batch")
     parser.add_argument("--baseline-physics", default=str(PREVIOUS_PHYSICS),
                         help="teacher-diagram overlay with the contact settings to compare the "
-                             "configured physics against (physics_speedup); default: the "
+                             "configured physics against (physics_speedup): by default the "
                              "settings before the throughput work")
+    add_renamed(parser, "--config", "--task", " (a task name or a teacher-diagram YAML, as "
+                "`train --task`)")
+    add_renamed(parser, "--envs", "--envs-per-worker", " (as in `train`; the in-process run "
+                "steps --workers x --envs-per-worker envs)")
 
 
 def _record(env, plans):
@@ -170,15 +180,16 @@ def _policy_results(args, cfg) -> dict:
 
     agent = TeacherAgent(args.policy, make_encoder(args.policy))
     factory = EnvFactory(cfg, args.seed)
-    rounds = max(args.steps // args.envs, 10)
-    local = _policy_loop(EnvBatch(factory, args.envs), agent, rounds)
+    envs = args.workers * args.envs_per_worker  # the same envs in both runs
+    rounds = max(args.steps // envs, 10)
+    local = _policy_loop(EnvBatch(factory, envs), agent, rounds)
     init_ray(num_cpus=args.workers)
     try:
-        remote = _policy_loop(RayEnvBatch(factory, args.workers, args.envs // args.workers), agent,
+        remote = _policy_loop(RayEnvBatch(factory, args.workers, args.envs_per_worker), agent,
                               rounds)
     finally:
         ray.shutdown()
-    return {"policy": args.policy, "envs": args.envs, "ray_workers": args.workers,
+    return {"policy": args.policy, "envs": envs, "ray_workers": args.workers,
             "in_process_policy_steps_per_s": local, "ray_policy_steps_per_s": remote,
             "ray_ratio": remote / local}
 
@@ -234,10 +245,7 @@ def run(args) -> dict:
     from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.rl.env import TeacherEnv
 
-    if args.policy and args.envs < args.workers:
-        raise InputError(f"--envs {args.envs} < --workers {args.workers}: "
-                         "every Ray worker needs an env")
-    env = TeacherEnv(args.config)
+    env = TeacherEnv(args.task)
     check_replayable(env.cfg)
     base_cfg = baseline_physics_config(env.cfg, args.baseline_physics)  # its errors come first
     run_plans(env, random_action_plans(env, 20, args.seed + 1))  # warm-up

@@ -36,7 +36,7 @@ def add_arguments(parser):
     parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
                         "the defaults like diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--duration", type=positive_float, default=10.0, help="seconds per push")
-    parser.add_argument("--objects", nargs="*", default=None, help="subset of object names")
+    parser.add_argument("--objects", nargs="*", default=None, help="subset of object names (default: every one)")
 
 
 def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = True) -> dict:

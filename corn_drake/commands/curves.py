@@ -24,19 +24,19 @@ def add_arguments(parser):
                              "steps/s, summed: the time on the machine it ran on; see --rate)")
     parser.add_argument("--rate", choices=("median", "recorded"), default="median",
                         help="with --x hours and --summary: charge every update at the run's "
-                             "median steps/s (default: steady when the core was shared for a "
-                             "while) or at the steps/s it recorded")
+                             "median steps/s (steady when the core was shared for a while) or at "
+                             "the steps/s it recorded")
     parser.add_argument("--rates", default="",
                         help="a `corn-drake bench policies` report: charge each run at its "
                              "policy's training steps/s there (same-run, quiet-machine rates) "
-                             "instead of --rate")
+                             "instead of --rate (default: none, --rate)")
     parser.add_argument("--summary", default="",
                         help="JSON path: each run's final step and hours, and every run at the "
-                             "shortest run's training time (its step, training success there)")
+                             "shortest run's training time (its step, training success there) (default: none)")
     parser.add_argument("--history", default="",
                         help="JSON path: each run's folder and every update's history row (the "
                              "numbers the figure plots), kept beside the figure since a run "
-                             "folder may not outlive the machine it ran on")
+                             "folder may not outlive the machine it ran on (default: none)")
 
 
 def run_history(run_dir: Path) -> tuple[str, list[dict]]:

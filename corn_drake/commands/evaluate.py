@@ -43,11 +43,16 @@ def add_arguments(parser):
                         help="run folder written by `corn-drake train` (teacher) or `corn-drake "
                              "distill` (student), or a reference: `scripted` (straight-line "
                              "pusher) or `still` (zero action)")
-    parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
-    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
-    parser.add_argument("--episodes", type=positive_int, default=10)
+    parser.add_argument("--objects", default="",
+                        help="object library folder (default: the run's object, or its library "
+                             "when it was trained with `train --objects`)")
+    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"),
+                        help="which objects of the library the episodes go round-robin over")
+    parser.add_argument("--episodes", type=positive_int, default=10,
+                        help="episodes in all, round-robin over the objects")
     parser.add_argument("--record", type=nonnegative_int, default=1,
-                        help="episodes saved as Meshcat HTML")
+                        help="the first N episodes saved as Meshcat HTML in REPORT_recordings/ beside the "
+                             "report (0: none)")
     parser.add_argument("--task", default=None,
                         help="task overlay (a name in diagrams/tasks/ or a YAML file) instead of "
                              "the run's task; for --run scripted/still, the task to run "
@@ -55,8 +60,10 @@ def add_arguments(parser):
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="override an env setting of the run's config, e.g. --set "
                              "task.episode_steps=50 (repeatable; printed and recorded in the "
-                             "report)")
-    parser.add_argument("--seed", type=nonnegative_int, default=1000)
+                             "report; default: none, the run's own settings)")
+    parser.add_argument("--seed", type=nonnegative_int, default=1000,
+                        help="base seed: episode k on an object is seeded from it, the object's id "
+                             "and k (the same --seed gives the same episodes)")
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
     parser.add_argument("--perception", choices=SEGMENTATION_MODES, default=None,
@@ -71,8 +78,8 @@ def add_arguments(parser):
     parser.add_argument("--checkpoint", default="",
                         help="teacher runs only: a kept checkpoint's file name in RUN/checkpoints "
                              "(e.g. step_000204800.pt, written with `train --set "
-                             "snapshot_every=N`) instead of last.pt")
-    add_torch_threads_argument(parser, "the policy's inference", default="auto")
+                             "snapshot_every=N`) instead of last.pt (default: last.pt)")
+    add_torch_threads_argument(parser, "the policy's inference")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
