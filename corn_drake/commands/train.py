@@ -23,9 +23,9 @@ from corn_drake.arguments.value_types import finite_float, positive_int
 from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS
 
 NAME = "train"
+HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
 # A new run's policy when --policy is not given: CORN, the method the project rebuilds.
 DEFAULT_POLICY = "corn"
-HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
 
 # The shortcut flags: argparse dest -> the TrainConfig field it sets (the run settings' shared
 # flags, then train's own). They default to None: a new run takes the field's default, a
@@ -52,7 +52,8 @@ def add_arguments(parser):
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="override a config field, e.g. --set ppo.lr=1e-4 or --set "
                              "task.episode_steps=50 (repeatable; KEY a TrainConfig field, the "
-                             "env's sections scene/randomization/controller/task without env.; default: none)")
+                             "env's sections scene/randomization/controller/task without env.; "
+                             "default: none)")
     parser.add_argument("--policy", choices=POLICY_KINDS, default=None,
                         help="the teacher's policy (the variants: corn_drake/rl/policy_kinds.py; "
                              f"default: {DEFAULT_POLICY} for a new run, the method the project "
@@ -65,7 +66,8 @@ def add_arguments(parser):
                         help="start from this finished run's trained agent (a curriculum, e.g. "
                              "push -> push_turn): its policy and encoder unless given, a fresh "
                              "optimiser and step count (default: none, a fresh agent)")
-    parser.add_argument("--rollout-steps", type=positive_int, default=None, help="default: 32")
+    parser.add_argument("--rollout-steps", type=positive_int, default=None,
+                        help="policy steps per env between PPO updates (default: 32)")
     parser.add_argument("--minibatches", type=positive_int, default=None,
                         help="PPO minibatches per epoch (default: 1, the authors' code)")
     parser.add_argument("--init-log-std", type=finite_float, default=None,
