@@ -15,6 +15,7 @@ import signal
 import sys
 
 from corn_drake import commands
+from corn_drake.arguments.help_format import DefaultsHelpFormatter
 from corn_drake.errors import InputError
 
 
@@ -30,7 +31,13 @@ def _command_modules():
 class OneLineParser(argparse.ArgumentParser):
     """argparse without the usage block on an error: one line naming the argument, exit 2, the
     same shape as an InputError's. Subcommand parsers inherit the class (add_subparsers uses
-    the parent's type), so `corn-drake train --steps 0` reads `corn-drake train: error: ...`."""
+    the parent's type), so `corn-drake train --steps 0` reads `corn-drake train: error: ...`.
+    Every parser made so (subcommands and `bench WHAT` included) shows its options' defaults in
+    --help (arguments/help_format.py)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -68,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_signal(signum, frame):
         interrupted.append(signum)
+        if signum == signal.SIGINT:  # as Python's own handler: code that waits for Ctrl-C
+            raise KeyboardInterrupt  # (evaluate --keep-open) catches it
         _interrupt(signum, frame)
 
     handlers = _install(on_signal)

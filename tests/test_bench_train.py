@@ -27,7 +27,7 @@ def report(tmp_path_factory):
     threads = torch.get_num_threads()
     try:
         assert main(["bench", "train", "--report", str(path), "--task", str(task),
-                     "--envs", str(ENVS), "--updates", str(UPDATES), "--rollout-steps",
+                     "--envs-per-worker", str(ENVS), "--updates", str(UPDATES), "--rollout-steps",
                      str(ROLLOUT), "--bare-steps", "12", "--torch-threads", "1"]) == 0
     finally:
         torch.set_num_threads(threads)  # the process's setting, for the tests after this one

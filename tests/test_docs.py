@@ -29,3 +29,32 @@ def test_min_goal_distance_names_both_sources():
     text = (ROOT / "corn_drake/config/task.py").read_text()
     block = text[text.index("class Full6dGoal"):text.index("min_goal_distance: float")]
     assert "0.1 m" in block and "0.055" in block
+
+
+def _readme_commands():
+    """Every `corn-drake ...` command line in README.md's code blocks (continuations joined)."""
+    text = (ROOT / "README.md").read_text()
+    blocks = text.split("```")[1::2]
+    for block in blocks:
+        for line in block.replace("\\\n", " ").splitlines():
+            line = line.strip().removeprefix(".venv/bin/")
+            if line.startswith("corn-drake "):
+                yield line
+
+
+def test_readme_commands_parse_with_the_current_flags():
+    """A renamed flag (issue 36: demo --objects, bench sim --config/--envs) must not survive in
+    the README: every command there parses."""
+    import shlex
+
+    from corn_drake.cli import build_parser
+
+    commands = list(_readme_commands())
+    assert len(commands) > 10
+    parser = build_parser()
+    for line in commands:
+        argv = shlex.split(line, comments=True)[1:]
+        try:
+            parser.parse_args(argv)
+        except SystemExit:
+            pytest.fail(f"README.md: `{line}` does not parse")

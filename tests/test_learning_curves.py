@@ -123,7 +123,7 @@ def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path, monkeypatch
 
     monkeypatch.setattr(timed_training, "run_trainer", run_trainer)
     report = tmp_path / "p.json"
-    assert main(["bench", "policies", "--policies", "state,corn", "--envs", "2", "--updates", "1",
+    assert main(["bench", "policies", "--policies", "state,corn", "--envs-per-worker", "2", "--updates", "1",
                  "--warmup-updates", "0", "--rollout-steps", "4", "--torch-threads", "1",
                  "--set", "ppo.separate_critic=true", "--report", str(report)]) == 0
     results = json.loads(report.read_text())["results"]

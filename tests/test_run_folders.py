@@ -357,3 +357,31 @@ def test_a_failure_before_any_output_leaves_no_trace_but_one_after_keeps_the_rec
             raise RuntimeError("killed mid-way")
     # Real output exists: the argument record stays, so a resume is checked against it.
     assert (started / "arguments.json").is_file() and (started / "shard_0.npz").is_file()
+
+
+def test_a_failure_before_any_output_removes_the_parents_it_made_and_only_those(tmp_path):
+    kept = tmp_path / "runs"
+    kept.mkdir()
+    (kept / "other_run").mkdir()  # the user's: stays
+    deep = kept / "new" / "deeper" / "run"
+    with pytest.raises(RuntimeError):
+        with lock_folder(deep):
+            assert deep.is_dir()
+            raise RuntimeError("bad input found after the lock")
+    assert not (kept / "new").exists() and (kept / "other_run").is_dir()
+
+
+@pytest.mark.parametrize("argv", [
+    ["train", "--policy", "state", "--task", "nosuch_task", "--out", "{out}"],
+    ["train", "--out", "{out}"],  # corn, the default policy, without --encoder
+    ["contact-data", "--objects", "{root}/nowhere", "--num-samples", "8", "--out", "{out}"],
+    ["objects", "--source", "{root}/nowhere", "--out", "{out}", "--no-progress"],
+    ["pretrain", "--model", "rot", "--objects", "{root}/nowhere", "--out", "{out}"],
+    ["pretrain", "--model", "corn", "--data", "{root}/nowhere", "--out", "{out}"],
+])
+def test_a_refused_command_leaves_no_folder_behind(tmp_path, capsys, argv):
+    """Issue 36: `train` refused for a bad --task left an empty runs/ behind."""
+    out = tmp_path / "runs" / "new_run"
+    assert main([a.format(out=out, root=tmp_path) for a in argv]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []

@@ -32,12 +32,12 @@ def test_count_is_set_inside_and_given_back_after():
         assert torch.get_num_threads() == before
 
 
-def test_train_keeps_torchs_count_and_evaluate_takes_auto_by_default():
+def test_every_command_takes_auto_by_default():
     from corn_drake.cli import build_parser
 
     parser = build_parser()
     train = parser.parse_args(["train", "--out", "somewhere"])
     bench = parser.parse_args(["bench", "policies", "--report", "r.json"])
     evaluate = parser.parse_args(["evaluate", "--run", "scripted", "--report", "r.json"])
-    assert train.torch_threads is None and bench.torch_threads is None
+    assert train.torch_threads == bench.torch_threads == evaluate.torch_threads
     assert evaluate.torch_threads == auto_torch_threads()

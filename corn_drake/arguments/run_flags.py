@@ -35,10 +35,14 @@ def add_run_arguments(parser, command: str, encoder_help: str) -> None:
                         help="total environment steps (default: 20000)")
     parser.add_argument("--workers", type=nonnegative_int, default=None,
                         help="Ray rollout workers (default 0: in-process)")
-    parser.add_argument("--envs-per-worker", type=positive_int, default=None, help="default: 4")
-    parser.add_argument("--seed", type=nonnegative_int, default=None, help="default: 0")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=None,
+                        help="envs each rollout worker steps (in this process with --workers 0) "
+                             "(default: 4)")
+    parser.add_argument("--seed", type=nonnegative_int, default=None,
+                        help="seed of the networks' initialisation and the envs' episodes "
+                             "(default: 0)")
     parser.add_argument("--ray-address", default=None,
-                        help="connect to a Ray cluster instead of a local one")
+                        help="connect to a Ray cluster (default: a local one, started with --workers)")
     parser.add_argument("--device", default=None,
                         help="torch device of the learner (its batched inference and updates): "
                              "cpu (default), cuda or cuda:N; the envs run on the CPU")

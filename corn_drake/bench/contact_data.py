@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from corn_drake.arguments.value_types import positive_int
 
 NAME = "contact-data"
@@ -19,8 +17,10 @@ HELP = "contact-data generation speed (samples/s) vs the plain numpy path"
 
 def add_arguments(parser):
     parser.add_argument("--objects", default="", help="object library (default: built-in primitives)")
-    parser.add_argument("--samples", type=positive_int, default=16384)
-    parser.add_argument("--batch", type=positive_int, default=4096)
+    parser.add_argument("--samples", type=positive_int, default=16384,
+                        help="samples generated in the timed run")
+    parser.add_argument("--batch", type=positive_int, default=4096,
+                        help="samples per generation call")
 
 
 def _objects(path):
@@ -36,6 +36,8 @@ def _objects(path):
 
 def _numpy_baseline(objects, n, rng, sdf):
     """Reference path: float64 numpy, SDF + gradient at every point, labels by tool-frame test."""
+    import numpy as np
+
     from corn_drake.contact.generate import random_rotations
 
     which = rng.integers(len(objects), size=n)
@@ -53,6 +55,8 @@ def _numpy_baseline(objects, n, rng, sdf):
 
 
 def run(args) -> dict:
+    import numpy as np
+
     from corn_drake.contact.generate import generate_samples, shard_rng
     from corn_drake.contact.gripper_sdf import GripperSDF
 

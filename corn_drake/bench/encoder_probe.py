@@ -11,8 +11,6 @@ import resource
 import sys
 import time
 
-import torch
-
 CHUNK = 256  # clouds per forward on CPU: bounds activations, measured faster than one big batch
 
 
@@ -22,6 +20,8 @@ def _rss_mb() -> float:
 
 
 def main(kind: str, batch: int) -> dict:
+    import torch
+
     from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM
     from corn_drake.nn.corn_encoder import CORNEncoder
     from corn_drake.nn.patchify import patch_indices

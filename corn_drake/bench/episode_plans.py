@@ -1,18 +1,21 @@
 """Random-action episode plans, and stepping an env through them: the workload the simulation
 benches (`bench sim`, `bench student`) time, the same plans for every env they compare.
+
+numpy is imported where it is used: `corn-drake bench` imports every module of this folder to
+build its parser, which must stay free of numpy, torch and Drake (tests/test_cli_startup.py).
 """
 
 from __future__ import annotations
 
 import time
 
-import numpy as np
-
-from corn_drake.contract import ACTION_DIM
-
 
 def random_action_plans(env, steps: int, seed: int):
     """Episode plans [(seed, actions)] adding up to `steps` policy steps."""
+    import numpy as np
+
+    from corn_drake.contract import ACTION_DIM
+
     rng = np.random.default_rng(seed)
     plans, left = [], steps
     while left > 0:

@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-from tqdm import tqdm
-
 from corn_drake.arguments.value_types import positive_int
+from corn_drake.config.choices import CAMERA_MODES, SEGMENTATION_MODES
 
 NAME = "perception"
 HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stage breakdown"
@@ -23,14 +21,21 @@ HELP = "frames/s of render -> cloud -> segmentation -> ICP pose, with a per-stag
 def add_arguments(parser):
     parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
                         "the defaults like diagrams/student_rollout.yaml (the default)")
-    parser.add_argument("--frames", type=positive_int, default=100)
-    parser.add_argument("--width", type=positive_int, default=None, help="override camera width")
-    parser.add_argument("--height", type=positive_int, default=None, help="override camera height")
-    parser.add_argument("--mode", choices=["fixed", "tracking"], default=None)
-    parser.add_argument("--segmentation", choices=["geometric", "ground_truth"], default=None)
+    parser.add_argument("--frames", type=positive_int, default=100, help="frames timed")
+    parser.add_argument("--width", type=positive_int, default=None,
+                        help="camera width in pixels (default: the config's)")
+    parser.add_argument("--height", type=positive_int, default=None,
+                        help="camera height in pixels (default: the config's)")
+    parser.add_argument("--mode", choices=CAMERA_MODES, default=None,
+                        help="camera mode (default: the config's)")
+    parser.add_argument("--segmentation", choices=SEGMENTATION_MODES, default=None,
+                        help="segmentation (default: the config's)")
 
 
 def measure(cfg, frames: int = 100, progress: bool = True) -> dict:
+    import numpy as np
+    from tqdm import tqdm
+
     from corn_drake.builders.perception_harness import PerceptionHarness, slide_and_turn_poses
 
     harness = PerceptionHarness(cfg)

@@ -18,6 +18,7 @@ import argparse
 import copy
 import dataclasses
 
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
 from corn_drake.arguments.torch_threads import add_torch_threads_argument
 from corn_drake.rl.policy_kinds import POLICY_KINDS
@@ -36,23 +37,28 @@ def policy_list(text: str) -> list[str]:
 
 
 def add_arguments(parser):
-    parser.add_argument("--policies", type=policy_list, default=list(POLICY_KINDS),
-                        help="comma-separated, the first is the reference (default: all six)")
+    parser.add_argument("--policies", type=policy_list, default=",".join(POLICY_KINDS),
+                        help="comma-separated, the first is the reference")
     parser.add_argument("--task", default="push",
                         help="task overlay: a name in diagrams/tasks/ or a YAML file")
     parser.add_argument("--objects", default="",
                         help="object library: the envs cycle its train objects, as `train "
                              "--objects` (default: the task's own object)")
-    parser.add_argument("--envs", type=positive_int, default=32, help="envs, in this process")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=32,
+                        help="envs, stepped in this process (as `train --workers 0 "
+                             "--envs-per-worker N`)")
+    add_renamed(parser, "--envs", "--envs-per-worker", " (as in `train`)")
     parser.add_argument("--updates", type=positive_int, default=3, help="PPO updates timed")
     parser.add_argument("--warmup-updates", type=nonnegative_int, default=1,
                         help="PPO updates run first, untimed")
-    parser.add_argument("--rollout-steps", type=positive_int, default=32)
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--rollout-steps", type=positive_int, default=32,
+                        help="policy steps per env and update")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the networks and the envs' episodes")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="a PPO setting of the runs being timed, e.g. --set "
                              "ppo.separate_critic=true (repeatable; ppo.* only: the update's "
-                             "cost depends on them, the envs' does not)")
+                             "cost depends on them, the envs' does not; default: none)")
     add_torch_threads_argument(parser, "every policy, as `train` takes it")
 
 
@@ -75,14 +81,14 @@ def run(args) -> dict:
     env_cfg.check()
     # Parsed once, before any env is built (a bad --set fails here); every run gets a copy.
     ppo = apply_sets(TrainConfig(), args.set, only="ppo").ppo
-    steps = args.envs * args.rollout_steps * args.updates  # timed, per policy
+    steps = args.envs_per_worker * args.rollout_steps * args.updates  # timed, per policy
     rates = {}
     with torch_threads(args.torch_threads):
         threads_used = torch.get_num_threads()
         for policy in args.policies:
             cfg = dataclasses.replace(
                 train_config(argparse.Namespace(**{**vars(args), "policy": policy}), env_cfg,
-                             workers=0, envs_per_worker=args.envs),
+                             workers=0, envs_per_worker=args.envs_per_worker),
                 ppo=copy.deepcopy(ppo))
             timer = PhaseTimer()
             run_trainer(cfg, timer, args.warmup_updates)
@@ -96,7 +102,7 @@ def run(args) -> dict:
         "reference": reference,
         "task": env_cfg.task.name,
         "objects": args.objects or env_cfg.scene.object.kind,
-        "envs": args.envs, "updates": args.updates, "warmup_updates": args.warmup_updates,
+        "envs": args.envs_per_worker, "updates": args.updates, "warmup_updates": args.warmup_updates,
         "rollout_steps": args.rollout_steps, "steps_per_policy": steps,
         "torch_threads": threads_used, "ppo_sets": list(args.set),
     }

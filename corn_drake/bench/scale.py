@@ -51,7 +51,7 @@ def worker_counts(text: str) -> list[int]:
 
 def add_arguments(parser):
     add_trainer_arguments(parser)
-    parser.add_argument("--workers", type=worker_counts, default=[1, 2],
+    parser.add_argument("--workers", type=worker_counts, default="1,2",
                         help="comma-separated Ray worker counts, e.g. 1,2,4,8,15 (1, the "
                              "baseline, is measured even when left out)")
     parser.add_argument("--envs-per-worker", type=positive_int, default=8,

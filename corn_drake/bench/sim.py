@@ -20,11 +20,9 @@ import io
 import pstats
 import time
 
-import numpy as np
-
 from corn_drake import DIAGRAMS_DIR
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
-from corn_drake.bench.episode_plans import random_action_plans, run_plans
 from corn_drake.errors import InputError
 from corn_drake.rl.policy_kinds import POLICY_KINDS
 
@@ -37,24 +35,35 @@ HELP = "TeacherEnv policy steps/s with random actions vs bare physics of the sam
 def add_arguments(parser):
     parser.add_argument("--steps", type=positive_int, default=600,
                         help="policy steps per measurement")
-    parser.add_argument("--config", default=None, help="teacher diagram YAML (default: diagrams/teacher_rollout.yaml)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--task", default=None,
+                        help="task overlay: a name in diagrams/tasks/ or a YAML file, as `train "
+                             "--task` (default: the base diagram, the paper's 6D task)")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the episodes and their random actions")
     parser.add_argument("--repeats", type=positive_int, default=3,
                         help="alternating env / bare-physics runs; the fastest of each is kept")
     parser.add_argument("--policy", default=None, choices=POLICY_KINDS,
-                        help="also measure with this policy (randomly initialised) in the loop")
-    parser.add_argument("--envs", type=positive_int, default=8,
-                        help="envs in the policy-in-the-loop runs")
+                        help="also measure with this policy (randomly initialised) in the loop "
+                             "(default: none, random actions only)")
     parser.add_argument("--workers", type=positive_int, default=2,
-                        help="Ray workers in the Ray run")
+                        help="Ray workers in the policy-in-the-loop Ray run")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=4,
+                        help="envs each Ray worker steps; the in-process run steps all of "
+                             "them (workers x envs per worker) in one batch")
     parser.add_argument("--baseline-physics", default=str(PREVIOUS_PHYSICS),
                         help="teacher-diagram overlay with the contact settings to compare the "
-                             "configured physics against (physics_speedup); default: the "
+                             "configured physics against (physics_speedup): by default the "
                              "settings before the throughput work")
+    add_renamed(parser, "--config", "--task", " (a task name or a teacher-diagram YAML, as "
+                "`train --task`)")
+    add_renamed(parser, "--envs", "--envs-per-worker", " (as in `train`; the in-process run "
+                "steps --workers x --envs-per-worker envs)")
 
 
 def _record(env, plans):
     """Untimed pass: per episode the DR sample, initial state and per-physics-step torques."""
+    import numpy as np
+
     clock, h = env.clock, env.clock.time_step
     ctrl = env.handles.controller
     recorded = []
@@ -78,6 +87,8 @@ def _record(env, plans):
 
 
 def _run_bare(env, recorded):
+    import numpy as np
+
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
@@ -128,11 +139,15 @@ def check_replayable(cfg) -> None:
 def bare_physics_rate(env, steps: int, seed: int) -> float:
     """Policy steps/s of the bare plant of `env`'s scene, replaying the torques of `steps`
     random-action policy steps recorded on `env` (untimed) from the same initial states."""
+    from corn_drake.bench.episode_plans import random_action_plans
+
     elapsed, _ = _run_bare(env, _record(env, random_action_plans(env, steps, seed)))
     return steps / elapsed
 
 
 def _profile_env(env, plans) -> list[str]:
+    from corn_drake.bench.episode_plans import run_plans
+
     profiler = cProfile.Profile()
     profiler.enable()
     run_plans(env, plans)
@@ -165,15 +180,16 @@ def _policy_results(args, cfg) -> dict:
 
     agent = TeacherAgent(args.policy, make_encoder(args.policy))
     factory = EnvFactory(cfg, args.seed)
-    rounds = max(args.steps // args.envs, 10)
-    local = _policy_loop(EnvBatch(factory, args.envs), agent, rounds)
+    envs = args.workers * args.envs_per_worker  # the same envs in both runs
+    rounds = max(args.steps // envs, 10)
+    local = _policy_loop(EnvBatch(factory, envs), agent, rounds)
     init_ray(num_cpus=args.workers)
     try:
-        remote = _policy_loop(RayEnvBatch(factory, args.workers, args.envs // args.workers), agent,
+        remote = _policy_loop(RayEnvBatch(factory, args.workers, args.envs_per_worker), agent,
                               rounds)
     finally:
         ray.shutdown()
-    return {"policy": args.policy, "envs": args.envs, "ray_workers": args.workers,
+    return {"policy": args.policy, "envs": envs, "ray_workers": args.workers,
             "in_process_policy_steps_per_s": local, "ray_policy_steps_per_s": remote,
             "ray_ratio": remote / local}
 
@@ -196,6 +212,7 @@ def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -
     """Bare-physics policy steps/s of `env`'s physics and of the same scene under `base_cfg`'s,
     each replaying its own recording of the same action plans; the two alternate `repeats`
     times and the best of each is kept (the least disturbed by other load)."""
+    from corn_drake.bench.episode_plans import random_action_plans
     from corn_drake.rl.env import TeacherEnv
 
     baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
@@ -223,12 +240,12 @@ def _physics_summary(physics) -> dict:
 
 
 def run(args) -> dict:
+    import numpy as np
+
+    from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.rl.env import TeacherEnv
 
-    if args.policy and args.envs < args.workers:
-        raise InputError(f"--envs {args.envs} < --workers {args.workers}: "
-                         "every Ray worker needs an env")
-    env = TeacherEnv(args.config)
+    env = TeacherEnv(args.task)
     check_replayable(env.cfg)
     base_cfg = baseline_physics_config(env.cfg, args.baseline_physics)  # its errors come first
     run_plans(env, random_action_plans(env, 20, args.seed + 1))  # warm-up

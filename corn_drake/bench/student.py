@@ -25,18 +25,19 @@ HELP = ("student env steps/s with rendering and the full perception chain, vs th
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.config.choices import SEGMENTATION_MODES
 
     parser.add_argument("--steps", type=positive_int, default=40,
-                        help="policy steps per measurement (default 40: well under a minute here)")
+                        help="policy steps per measurement (40: well under a minute here)")
     parser.add_argument("--config", default=None,
                         help="student diagram YAML, read on top of the defaults like "
                              "diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--perception", choices=SEGMENTATION_MODES, default="geometric",
-                        help="segmentation in the student env (default geometric: the full chain)")
+                        help="segmentation in the student env (geometric: the full chain)")
     parser.add_argument("--repeats", type=positive_int, default=2,
                         help="alternating student / teacher runs; the fastest of each is kept")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the episodes and their random actions")
 
 
 def _run_policy_in_diagram(env, plans) -> float:

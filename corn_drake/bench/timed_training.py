@@ -34,7 +34,8 @@ def add_trainer_arguments(parser) -> None:
                              "simulators cost far more than later ones)")
     parser.add_argument("--rollout-steps", type=positive_int, default=32,
                         help="policy steps per env and update")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the networks and the envs' episodes")
     add_torch_threads_argument(parser, "this run, as `train` takes it; the report records the "
                                        "count used")
 

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-from tqdm import tqdm
-
 from corn_drake.arguments.value_types import positive_float
 from corn_drake.errors import InputError
 
@@ -39,10 +36,13 @@ def add_arguments(parser):
     parser.add_argument("--config", default=None, help="student diagram YAML, read on top of "
                         "the defaults like diagrams/student_rollout.yaml (the default)")
     parser.add_argument("--duration", type=positive_float, default=10.0, help="seconds per push")
-    parser.add_argument("--objects", nargs="*", default=None, help="subset of object names")
+    parser.add_argument("--objects", nargs="*", default=None, help="subset of object names (default: every one)")
 
 
 def evaluate(config=None, duration: float = 10.0, names=None, progress: bool = True) -> dict:
+    import numpy as np
+    from tqdm import tqdm
+
     from corn_drake.config.diagram_files import load_student_config
     from corn_drake.builders.perception_harness import (PerceptionHarness, slide_and_turn_poses,
                                                         track_sequence)

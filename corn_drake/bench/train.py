@@ -27,6 +27,7 @@ them; the timers below go on this run's instances (bench/phases.py):
 from __future__ import annotations
 
 from corn_drake.bench.timed_training import COLLECT, PPO_UPDATE, add_trainer_arguments
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import positive_int
 
 NAME = "train"
@@ -38,7 +39,10 @@ FRACTION_KEYS = ("physics", "python_systems", "policy_inference", "ppo_update",
 
 def add_arguments(parser):
     add_trainer_arguments(parser)
-    parser.add_argument("--envs", type=positive_int, default=32, help="envs, in this process")
+    parser.add_argument("--envs-per-worker", type=positive_int, default=32,
+                        help="envs, stepped in this process (as `train --workers 0 "
+                             "--envs-per-worker N`)")
+    add_renamed(parser, "--envs", "--envs-per-worker", " (as in `train`)")
     parser.add_argument("--bare-steps", type=positive_int, default=300,
                         help="policy steps of the bare-physics replay")
 
@@ -95,9 +99,9 @@ def run(args) -> dict:
     env_cfg = load_teacher_config(args.task)
     env_cfg.check()
     check_replayable(env_cfg)
-    per_update = args.envs * args.rollout_steps
+    per_update = args.envs_per_worker * args.rollout_steps
     steps = per_update * args.updates  # timed
-    cfg = train_config(args, env_cfg, workers=0, envs_per_worker=args.envs)
+    cfg = train_config(args, env_cfg, workers=0, envs_per_worker=args.envs_per_worker)
     timer = PhaseTimer()
     with torch_threads(args.torch_threads):
         trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
@@ -120,7 +124,7 @@ def run(args) -> dict:
         "policy": args.policy,
         "task": env_cfg.task.name,
         "object": scene_object,
-        "envs": args.envs,
+        "envs": args.envs_per_worker,
         "updates": args.updates,
         "warmup_updates": args.warmup_updates,
         "rollout_steps": args.rollout_steps,

@@ -11,7 +11,6 @@ import importlib
 import pkgutil
 
 from corn_drake import bench as bench_pkg
-from corn_drake.bench.report import write_report
 
 NAME = "bench"
 HELP = "measure speed/memory; writes a JSON report with the figure and its same-run baseline"
@@ -37,6 +36,8 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
+    from corn_drake.bench.report import write_report
+
     result = args._bench_run(args)
     report = write_report(args.report, args._bench_name, result)
     print(f"wrote {args.report}")

@@ -25,8 +25,9 @@ def add_arguments(parser):
     parser.add_argument("--report", action="append", required=True, dest="reports",
                         help="an `evaluate` report JSON (repeat for each row)")
     parser.add_argument("--summary", default="",
-                        help="`corn-drake curves --summary` JSON of the reports' training runs")
-    parser.add_argument("--out", default="", help="also write the table (markdown) here")
+                        help="`corn-drake curves --summary` JSON of the reports' training runs (default: none, "
+                             "no equal-time columns)")
+    parser.add_argument("--out", default="", help="also write the table (markdown) here (default: print only)")
 
 
 def _episodes_key(report: dict) -> list[tuple]:

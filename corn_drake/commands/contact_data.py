@@ -18,10 +18,12 @@ def add_arguments(parser):
     parser.add_argument("--num-samples", type=positive_int, required=True, help="training samples")
     parser.add_argument("--eval-samples", type=positive_int, default=None,
                         help="samples for each of val / unseen (default: num-samples / 10)")
-    parser.add_argument("--shard-size", type=positive_int, default=4096)
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--out", required=True)
-    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--shard-size", type=positive_int, default=4096,
+                        help="samples per shard file (a killed run resumes at a shard)")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the samples (each shard's from it, its split and index)")
+    parser.add_argument("--out", required=True, help="dataset folder, e.g. data/contact")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def output_arguments(args) -> dict:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.storage.atomic_files import read_json
 
 NAME = "curves"
 HELP = "plot success rate and return of several training runs on one figure"
@@ -25,25 +24,26 @@ def add_arguments(parser):
                              "steps/s, summed: the time on the machine it ran on; see --rate)")
     parser.add_argument("--rate", choices=("median", "recorded"), default="median",
                         help="with --x hours and --summary: charge every update at the run's "
-                             "median steps/s (default: steady when the core was shared for a "
-                             "while) or at the steps/s it recorded")
+                             "median steps/s (steady when the core was shared for a while) or at "
+                             "the steps/s it recorded")
     parser.add_argument("--rates", default="",
                         help="a `corn-drake bench policies` report: charge each run at its "
                              "policy's training steps/s there (same-run, quiet-machine rates) "
-                             "instead of --rate")
+                             "instead of --rate (default: none, --rate)")
     parser.add_argument("--summary", default="",
                         help="JSON path: each run's final step and hours, and every run at the "
-                             "shortest run's training time (its step, training success there)")
+                             "shortest run's training time (its step, training success there) (default: none)")
     parser.add_argument("--history", default="",
                         help="JSON path: each run's folder and every update's history row (the "
                              "numbers the figure plots), kept beside the figure since a run "
-                             "folder may not outlive the machine it ran on")
+                             "folder may not outlive the machine it ran on (default: none)")
 
 
 def run_history(run_dir: Path) -> tuple[str, list[dict]]:
     """(label, history rows) of one training run; a clear error when it has neither file."""
     checkpoint = run_dir / "checkpoints" / "last.pt"
     metrics = run_dir / "metrics.json"
+    from corn_drake.storage.atomic_files import read_json
     from corn_drake.storage.checkpoint_files import load_checkpoint
 
     state = load_checkpoint(checkpoint, required=("history",))  # prev.pt if last.pt is unreadable
@@ -67,6 +67,8 @@ def run_history(run_dir: Path) -> tuple[str, list[dict]]:
 
 def benchmarked_rates(path: str) -> dict[str, float]:
     """policy -> training steps/s of a `corn-drake bench policies` report."""
+    from corn_drake.storage.atomic_files import read_json
+
     report = read_json(path, "bench policies report")
     is_policies = isinstance(report, dict) and report.get("benchmark") == "policies"
     rates = report.get("results", {}).get("train_steps_per_s") if is_policies else None

@@ -18,6 +18,7 @@ import dataclasses
 import time
 from pathlib import Path
 
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
 
 # The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
@@ -33,13 +34,21 @@ HELP = "run the pipeline end to end at a small default size; prints where each o
 
 def add_arguments(parser):
     parser.add_argument("--out", default="runs/demo", help="output folder")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--objects", type=positive_int, default=14, help="procedural objects")
-    parser.add_argument("--contact-samples", type=positive_int, default=20_000)
-    parser.add_argument("--pretrain-steps", type=positive_int, default=300)
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of every stage (library, contact data, pretraining, teacher)")
+    parser.add_argument("--num-objects", type=positive_int, default=14,
+                        help="procedural objects in the demo's library (as `objects --num`)")
+    parser.add_argument("--contact-samples", type=positive_int, default=20_000,
+                        help="contact-data training samples")
+    parser.add_argument("--pretrain-steps", type=positive_int, default=300,
+                        help="contact-pretraining steps of the CORN encoder")
     parser.add_argument("--train-steps", type=positive_int, default=4096, help="teacher env steps")
-    parser.add_argument("--eval-episodes", type=positive_int, default=2)
-    parser.add_argument("--bench-steps", type=positive_int, default=200)
+    parser.add_argument("--eval-episodes", type=positive_int, default=2,
+                        help="episodes of each evaluation on the unseen objects")
+    parser.add_argument("--bench-steps", type=positive_int, default=200,
+                        help="policy steps of the simulation-speed measurement")
+    add_renamed(parser, "--objects", "--num-objects",
+                " (a count; --objects is an object library folder in every other command)")
 
 
 def _stage(name: str, outputs: dict, t0: float):
@@ -71,7 +80,7 @@ def run(args) -> int:
     cfg = ProcessConfig()
     cfg.drops.drops = 32
     library = out / "library"
-    build_procedural(library, args.objects, args.seed, cfg, progress=False)
+    build_procedural(library, args.num_objects, args.seed, cfg, progress=False)
     outputs["object library"] = library / "manifest.json"
 
     _stage("2/6 contact data", outputs, t0)

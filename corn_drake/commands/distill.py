@@ -26,14 +26,14 @@ RESUME_MAY_CHANGE = (*RESUME_MAY_CHANGE, "log_every")
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
-    from corn_drake.config.training import STUDENT_ACTIONS
+    from corn_drake.config.choices import SEGMENTATION_MODES
+    from corn_drake.config.choices import STUDENT_ACTIONS
 
     add_run_arguments(parser, NAME, encoder_help="contact-pretrained CORN encoder for the "
                                                  "student (default: the teacher run's encoder)")
     parser.add_argument("--teacher", default=None,
                         help="the teacher's run folder (written by `corn-drake train`); "
-                             "required for a new run")
+                             "required for a new run (default: a resumed run's recorded one)")
     parser.add_argument("--config", default=None,
                         help="student diagram layer read on top of the teacher run's env "
                              "(default: diagrams/student_rollout.yaml)")
@@ -50,7 +50,8 @@ def add_arguments(parser):
                         help="env steps over which beta falls linearly to 0 (default: 10000)")
     parser.add_argument("--student-action", choices=STUDENT_ACTIONS, default=None,
                         help="the student's own action: its mean (default) or a sample")
-    parser.add_argument("--lr", type=positive_float, default=None, help="default: 3e-4")
+    parser.add_argument("--lr", type=positive_float, default=None,
+                        help="the student's Adam learning rate (default: 3e-4)")
     parser.add_argument("--checkpoint-every", type=positive_int, default=None,
                         help="windows between checkpoints (default: 50)")
     parser.add_argument("--log-every", type=positive_int, default=None,

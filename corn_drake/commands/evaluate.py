@@ -10,7 +10,9 @@ a library: --objects, else the one the run was trained on with `train --objects`
 are recorded to Meshcat HTML next to the report; `--attention` paints a corn / e2e policy's
 attention on the object's points there and in the live Meshcat (viz/attention_view.py). The
 report's folder (and the recordings') are
-checked writable before the first episode.
+checked writable before the first episode. A progress bar counts the episodes (--no-progress:
+none), the recordings' folder (REPORT_recordings/) is printed at the end, and `--keep-open`
+keeps the Meshcat server, whose URL is printed before the episodes, alive until Ctrl-C.
 
 Which policy: `--run` names a `corn-drake train` run (the teacher), a `corn-drake distill` run
 (the student: its config.yaml is a DistillConfig), or a reference controller. A student is
@@ -36,18 +38,23 @@ REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
-    from corn_drake.config.student import SEGMENTATION_MODES
+    from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
     parser.add_argument("--run", required=True,
                         help="run folder written by `corn-drake train` (teacher) or `corn-drake "
                              "distill` (student), or a reference: `scripted` (straight-line "
                              "pusher) or `still` (zero action)")
-    parser.add_argument("--objects", default="", help="object library folder (default: the run's object)")
-    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
-    parser.add_argument("--episodes", type=positive_int, default=10)
-    parser.add_argument("--record", type=nonnegative_int, default=1,
-                        help="episodes saved as Meshcat HTML")
+    parser.add_argument("--objects", default="",
+                        help="object library folder (default: the run's object, or its library "
+                             "when it was trained with `train --objects`)")
+    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"),
+                        help="which objects of the library the episodes go round-robin over")
+    parser.add_argument("--episodes", type=positive_int, default=10,
+                        help="episodes in all, round-robin over the objects")
+    parser.add_argument("--record", type=nonnegative_int, default=1, metavar="N",
+                        help="the first N episodes saved as Meshcat HTML in REPORT_recordings/ beside the "
+                             "report (0: none)")
     parser.add_argument("--task", default=None,
                         help="task overlay (a name in diagrams/tasks/ or a YAML file) instead of "
                              "the run's task; for --run scripted/still, the task to run "
@@ -55,8 +62,10 @@ def add_arguments(parser):
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="override an env setting of the run's config, e.g. --set "
                              "task.episode_steps=50 (repeatable; printed and recorded in the "
-                             "report)")
-    parser.add_argument("--seed", type=nonnegative_int, default=1000)
+                             "report; default: none, the run's own settings)")
+    parser.add_argument("--seed", type=nonnegative_int, default=1000,
+                        help="base seed: episode k on an object is seeded from it, the object's id "
+                             "and k (the same --seed gives the same episodes)")
     parser.add_argument("--stochastic", action="store_true",
                         help="sample actions from the policy (as in training) instead of its mean")
     parser.add_argument("--perception", choices=SEGMENTATION_MODES, default=None,
@@ -71,8 +80,13 @@ def add_arguments(parser):
     parser.add_argument("--checkpoint", default="",
                         help="teacher runs only: a kept checkpoint's file name in RUN/checkpoints "
                              "(e.g. step_000204800.pt, written with `train --set "
-                             "snapshot_every=N`) instead of last.pt")
-    add_torch_threads_argument(parser, "the policy's inference", default="auto")
+                             "snapshot_every=N`) instead of last.pt (default: last.pt)")
+    add_torch_threads_argument(parser, "the policy's inference")
+    parser.add_argument("--keep-open", action="store_true",
+                        help="keep the Meshcat server alive after the episodes, until Ctrl-C: "
+                             "its URL is printed at the start; the live view shows every episode "
+                             "and its animation controls replay the recorded ones")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--report", required=True, help="JSON report path")
 
 
@@ -181,10 +195,12 @@ def run(args) -> int:
                  "observation_noise": dataclasses.asdict(student_cfg.observation)}
         print(f"student perception: {student_cfg.segmentation.mode} segmentation + ICP tracking "
               f"(trained with {trained_with})")
+    meshcat = _open_meshcat() if args.keep_open else None
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
     with torch_threads(args.torch_threads):
         report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
-                          out_dir, stochastic=args.stochastic, attention=args.attention)
+                          out_dir, stochastic=args.stochastic, attention=args.attention,
+                          meshcat=meshcat, progress=not args.no_progress)
     report.update(extra)
     report.update({"run": str(args.run), "policy": policy,
                    "overrides": [dataclasses.asdict(change) for change in overrides],
@@ -197,4 +213,32 @@ def run(args) -> int:
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")
+    recorded = min(args.record, args.episodes)
+    if recorded:  # the HTML files are the evaluation's pictures: say where they are
+        print(f"recordings: {recorded} episode(s) as Meshcat HTML in {out_dir}/ (open one in a "
+              "browser; its animation controls replay the episode)")
+    if meshcat is not None:
+        _wait_for_ctrl_c(meshcat)
     return 0
+
+
+def _open_meshcat():
+    """The Meshcat that --keep-open holds after the episodes, its URL printed before them so the
+    live view can be opened while they run."""
+    from pydrake.geometry import Meshcat
+
+    meshcat = Meshcat()
+    print(f"Meshcat live view: {meshcat.web_url()}", flush=True)
+    return meshcat
+
+
+def _wait_for_ctrl_c(meshcat) -> None:
+    """Keeps the process, and with it the Meshcat server, alive until Ctrl-C (SIGINT)."""
+    import time
+
+    print(f"Meshcat stays open at {meshcat.web_url()}; press Ctrl-C to close it", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        print("closed Meshcat", flush=True)

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from corn_drake.arguments.value_types import nonnegative_int
+
 NAME = "gallery"
 HELP = "PNG stills (start, middle, end) of a teacher's episodes, coloured by its attention"
 
@@ -23,7 +25,8 @@ def add_arguments(parser):
     parser.add_argument("--objects", required=True, help="object library folder")
     parser.add_argument("--ids", default="",
                         help="comma-separated object ids (default: the first 3 unseen)")
-    parser.add_argument("--seed", type=int, default=1000, help="as evaluate's --seed")
+    parser.add_argument("--seed", type=nonnegative_int, default=1000,
+                        help="as evaluate's --seed: each object's first episode of that evaluation")
     parser.add_argument("--out", required=True, help="output folder")
 
 

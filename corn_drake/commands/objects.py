@@ -20,20 +20,21 @@ HELP = "build an object library: --source procedural, or --source PATH (OBJ/STL/
 
 def add_arguments(parser):
     parser.add_argument("--source", default="procedural", help="'procedural' or a mesh folder")
-    parser.add_argument("--num", type=positive_int, default=80, help="procedural objects")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
+    parser.add_argument("--num", type=positive_int, default=80, help="procedural objects in the full library (train and unseen)")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the shapes, the train/unseen split and the drops")
     parser.add_argument("--drops", type=positive_int, default=128,
                         help="drops per object for stable poses")
     parser.add_argument("--split", choices=("train", "unseen"), default=None,
                         help="procedural only: build just the objects of this split of the full "
                              "--num build, identical to theirs (e.g. the unseen objects to "
                              "evaluate shipped weights on); the same command without --split "
-                             "completes the library later")
+                             "completes the library later (default: both splits)")
     parser.add_argument("--workers", type=positive_int, default=1,
                         help="procedural only: processes building objects side by side (the "
                              "library is the same as with 1)")
-    parser.add_argument("--out", required=True)
-    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--out", required=True, help="library folder, e.g. data/library")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def output_arguments(args) -> dict:

@@ -34,15 +34,17 @@ PRETEXT_MODELS = ("p2v-lite", "rot")
 
 def add_arguments(parser):
     parser.add_argument("--data", default=None,
-                        help="contact-data folder (--model corn, pointnet, both)")
+                        help="contact-data folder (--model corn, pointnet, both; default: none)")
     parser.add_argument("--objects", default=None,
                         help="object library folder whose clouds are the pretext data "
-                             "(--model p2v-lite, rot)")
+                             "(--model p2v-lite, rot; default: none)")
     parser.add_argument("--out", required=True, help="run folder, e.g. runs/pretrain")
-    parser.add_argument("--model", choices=CONTACT_MODELS + PRETEXT_MODELS, default="both")
-    parser.add_argument("--steps", type=positive_int, default=2000)
+    parser.add_argument("--model", choices=CONTACT_MODELS + PRETEXT_MODELS, default="both",
+                        help="corn (the contact-pretrained patch encoder), pointnet (its "
+                             "baseline), both, or a pretext baseline (p2v-lite, rot)")
+    parser.add_argument("--steps", type=positive_int, default=2000, help="optimiser steps")
     parser.add_argument("--pointnet-steps", type=positive_int, default=None,
-                        help="PointNet steps (overrides --pointnet-budget)")
+                        help="PointNet steps (overrides --pointnet-budget; default: from --pointnet-budget)")
     parser.add_argument("--pointnet-budget", choices=("steps", "time"), default="steps",
                         help="with --model both: PointNet gets CORN's steps or CORN's wall-clock")
     parser.add_argument("--lr", type=positive_float, default=None,
@@ -50,12 +52,14 @@ def add_arguments(parser):
     parser.add_argument("--batch-size", type=positive_int, default=None,
                         help="default: 1024 for contact pretraining (the paper's), 512 for "
                              "p2v-lite and rot (point2vec's)")
-    parser.add_argument("--eval-every", type=positive_int, default=250)
+    parser.add_argument("--eval-every", type=positive_int, default=250,
+                        help="steps between held-out evaluations (and checkpoints)")
     parser.add_argument("--eval-samples", type=positive_int, default=None,
                         help="held-out samples per evaluation (default: 4096 contact, 1024 "
                              "pretext)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0)
-    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--seed", type=nonnegative_int, default=0,
+                        help="seed of the initialisation and the batches")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args) -> int:

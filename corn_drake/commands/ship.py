@@ -42,7 +42,7 @@ def add_arguments(parser):
                         help="the `corn-drake objects` command that rebuilds the evaluated "
                              "objects (its --out becomes the shipped config's library)")
     parser.add_argument("--train-command", default="",
-                        help="the command that trained the run, recorded on the card")
+                        help="the command that trained the run, recorded on the card (default: none)")
     parser.add_argument("--out", required=True, help="weights folder, e.g. models/weights/push_corn")
 
 

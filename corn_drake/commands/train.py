@@ -20,10 +20,12 @@ from corn_drake.arguments.run_flags import (RESUME_MAY_CHANGE, RUN_SHORTCUTS, ad
                                             flag_of_field)
 from corn_drake.arguments.torch_threads import add_torch_threads_argument
 from corn_drake.arguments.value_types import finite_float, positive_int
-from corn_drake.rl.policy_kinds import POLICY_KINDS
+from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS
 
 NAME = "train"
 HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
+# A new run's policy when --policy is not given: CORN, the method the project rebuilds.
+DEFAULT_POLICY = "corn"
 
 # The shortcut flags: argparse dest -> the TrainConfig field it sets (the run settings' shared
 # flags, then train's own). They default to None: a new run takes the field's default, a
@@ -38,32 +40,40 @@ RESUME_MAY_CHANGE = (*RESUME_MAY_CHANGE, "snapshot_every")
 
 
 def add_arguments(parser):
-    add_run_arguments(parser, NAME, encoder_help="pretrained encoder checkpoint (corn, pn, "
-                                                 "p2v-lite, rot), of the kind the policy names")
+    add_run_arguments(parser, NAME, encoder_help="pretrained encoder file of the kind the policy "
+                                                 "names, needed by corn (the default policy), pn, "
+                                                 "p2v-lite and rot: e.g. `corn-drake pretrain`'s "
+                                                 "OUT/encoder.pt or the shipped models/weights/"
+                                                 "push_corn/encoder.pt (default: none; a resumed "
+                                                 "run's recorded one)")
     parser.add_argument("--task", default=None,
                         help="task overlay: a name in diagrams/tasks/ or a YAML file "
                              "(default: the base diagram, the paper's 6D task)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="override a config field, e.g. --set ppo.lr=1e-4 or --set "
                              "task.episode_steps=50 (repeatable; KEY a TrainConfig field, the "
-                             "env's sections scene/randomization/controller/task without env.)")
+                             "env's sections scene/randomization/controller/task without env.; "
+                             "default: none)")
     parser.add_argument("--policy", choices=POLICY_KINDS, default=None,
-                        help="default: state (the variants: corn_drake/rl/policy_kinds.py)")
+                        help="the teacher's policy (the variants: corn_drake/rl/policy_kinds.py; "
+                             f"default: {DEFAULT_POLICY} for a new run, the method the project "
+                             "is named for, which needs --encoder; a resumed run keeps its own, "
+                             "an --init-from run takes its source's)")
     parser.add_argument("--objects", default=None,
                         help="object library folder: train on all its train objects "
                              "(default: the task's object)")
     parser.add_argument("--init-from", default=None, metavar="RUN",
                         help="start from this finished run's trained agent (a curriculum, e.g. "
                              "push -> push_turn): its policy and encoder unless given, a fresh "
-                             "optimiser and step count")
-    parser.add_argument("--rollout-steps", type=positive_int, default=None, help="default: 32")
+                             "optimiser and step count (default: none, a fresh agent)")
+    parser.add_argument("--rollout-steps", type=positive_int, default=None,
+                        help="policy steps per env between PPO updates (default: 32)")
     parser.add_argument("--minibatches", type=positive_int, default=None,
                         help="PPO minibatches per epoch (default: 1, the authors' code)")
     parser.add_argument("--init-log-std", type=finite_float, default=None,
                         help="initial log-std of the Gaussian policy (default: the paper's 0)")
     add_torch_threads_argument(parser, "the agent's inference and PPO updates (not recorded "
-                                       "in the run: it changes the speed, not the results; 1 "
-                                       "when another busy process shares a small machine)")
+                                       "in the run: it changes the speed, not the results)")
 
 
 def requested_config(args, recorded):
@@ -76,6 +86,8 @@ def requested_config(args, recorded):
 
     if recorded is None:
         cfg = TrainConfig(env=load_teacher_config(args.task))
+        if args.policy is None and args.init_from is None:  # --init-from takes its source's
+            cfg = set_fields(cfg, {"policy": DEFAULT_POLICY}, "--policy")
     else:
         cfg = replace_task(recorded, args.task) if args.task is not None else recorded
     for dest, field in SHORTCUTS.items():
@@ -129,7 +141,23 @@ def checked_config(cfg, args, new_run: bool):
 
         cfg = check_init_source(cfg, take_policy=args.policy is None)  # and its encoder
     training_device(cfg.device, argument_of_field("device"))  # e.g. cuda on a CPU machine
+    check_encoder_given(cfg, args)
     return cfg
+
+
+def check_encoder_given(cfg, args) -> None:
+    """A policy that reads a frozen pretrained encoder refuses to start without one, saying
+    where one comes from (corn is the default policy, so this is a newcomer's first error)."""
+    from corn_drake.errors import InputError
+
+    if cfg.policy not in FROZEN_ENCODER_POLICIES or cfg.encoder or cfg.init_from:
+        return
+    given = "" if args.policy else " (the default)"
+    source = ("`corn-drake pretrain --model corn` writes OUT/encoder.pt; the shipped one is "
+              "models/weights/push_corn/encoder.pt" if cfg.policy == "corn" else
+              "`corn-drake pretrain` writes it")
+    raise InputError(f"--policy {cfg.policy}{given} needs --encoder FILE, its pretrained encoder "
+                     f"({source}); or choose --policy state (no encoder) or e2e (trains its own)")
 
 
 def check_config(cfg) -> None:

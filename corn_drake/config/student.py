@@ -14,6 +14,7 @@ import math
 
 from pydrake.systems.sensors import CameraConfig
 
+from corn_drake.config.choices import CAMERA_MODES, SEGMENTATION_MODES  # noqa: F401 (re-exported)
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.yaml_io import pickle_as_yaml
 from corn_drake.contract import ENCODER_INPUT_SCALE
@@ -22,8 +23,6 @@ from corn_drake.errors import InputError
 # The authors' three eyes (official code), in the table frame = our world frame.
 DEFAULT_EYES = [[0.458, -0.40, 0.740], [-0.238, 0.388, 0.694], [-0.408, -0.328, 0.706]]
 
-CAMERA_MODES = ("fixed", "tracking")
-SEGMENTATION_MODES = ("geometric", "ground_truth")
 OUTLIER_SCALINGS = ("pixel_density", "none")
 
 # CameraConfig fields the rig cannot honour, and why. They must keep Drake's defaults, so a value

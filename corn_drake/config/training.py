@@ -8,6 +8,7 @@ import dataclasses as dc
 import typing
 
 from corn_drake.config.bounds import check_bounds
+from corn_drake.config.choices import STUDENT_ACTIONS
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.errors import InputError
@@ -130,9 +131,6 @@ class TrainConfig(RunSettings):
         """InputError naming the first field a run cannot start with (the env's too)."""
         check_bounds(self)
         self.env.check()
-
-
-STUDENT_ACTIONS = ("mean", "sample")
 
 
 @dc.dataclass

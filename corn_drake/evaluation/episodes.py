@@ -128,7 +128,8 @@ def episode_seed(seed: int, object_id: str, repeat: int) -> int:
 
 
 def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
-             stochastic: bool = False, attention: bool = False) -> dict:
+             stochastic: bool = False, attention: bool = False, meshcat=None,
+             progress: bool = False) -> dict:
     """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
     in the evaluation diagram of `cfg` (policy_env: a TeacherDiagramConfig and a teacher
     agent, or a StudentDiagramConfig and a StudentPolicy); the first `record` are saved as
@@ -137,7 +138,10 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     diagram; with `stochastic` it samples the actions, the noise drawn from the episode's seed.
     With `attention` (a teacher that cross-attends: TeacherAgent.has_attention), its attention
     is painted on the object's cloud every step, in the recordings and in the live Meshcat
-    (made even when `record` is 0).
+    (made even when `record` is 0). `meshcat`: the Meshcat to draw in (the caller's, e.g. one it
+    keeps open after the episodes); made here when recording or attention needs one. With
+    `progress`, a tqdm bar over the episodes (on stderr) counts the successes so far: a
+    200-episode student evaluation otherwise runs silently for minutes.
 
     Returns the report: task (the task's name), action_step (controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
@@ -154,13 +158,15 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     if attention and not getattr(agent, "has_attention", False):
         raise InputError(f"evaluate: attention needs a policy that cross-attends over patches "
                          f"(corn, e2e), got {getattr(agent, 'kind', type(agent).__name__)!r}")
-    meshcat = None
-    if record > 0 or attention:
+    if meshcat is None and (record > 0 or attention):
         from pydrake.geometry import Meshcat
 
         meshcat = Meshcat()
+    from tqdm import tqdm
+
     per_object, rows, tracked = defaultdict(list), [], []
     envs = {}
+    bar = tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress)
     for k in range(episodes):
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
@@ -180,6 +186,9 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
         if isinstance(env, StudentEnv):  # the student's pose tracking is part of its result
             rows[-1]["tracking"] = tracking_summary(result.tracking)
             tracked += result.tracking
+        bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
+        bar.update()
+    bar.close()
     rates = {o: float(np.mean(s)) for o, s in per_object.items()}
     teacher_cfg = env.teacher_cfg
     report = {"task": teacher_cfg.task.name,

@@ -8,8 +8,9 @@ Measured on a project machine (2 vCPUs giving one core of throughput), docs/resu
 - training beside one other busy process: 2 threads wait on each other and train 4.5x slower
   than 1 (bench train corn: 42 against 190-198 steps/s);
 - evaluation (one observation at a time): 1 and 2 threads level quiet (40 episodes in 23-26 s).
-So `train` and the trainer benchmarks keep torch's own count unless told (pass 1 when something
-else will run beside them), and `evaluate` takes one thread on such a machine ("auto").
+So every command defaults to "auto" (one default, issue 36): one thread on such a machine, which
+costs a quiet `corn` run up to 12 % and spares it the 4.5x loss when anything runs beside it;
+torch's own count on a larger machine.
 """
 
 from __future__ import annotations

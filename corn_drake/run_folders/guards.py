@@ -34,6 +34,13 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
     folder = Path(folder)
     existed = folder.is_dir()
     before = set(os.listdir(folder)) if existed else set()
+    # The missing folders above it that mkdir(parents=True) makes, nearest first: a refused
+    # `train --out runs/x` must not leave an empty runs/ behind either.
+    made_parents = []
+    for parent in folder.absolute().parents:
+        if parent.exists():
+            break
+        made_parents.append(parent)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
@@ -51,23 +58,31 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         yield folder
     except BaseException:
-        _undo_bookkeeping(folder, existed, before)
+        _undo_bookkeeping(folder, existed, before, made_parents)
         raise
     finally:
         os.close(fd)  # closing the only descriptor releases the flock
 
 
-def _undo_bookkeeping(folder: Path, existed: bool, before: set[str]) -> None:
+def _undo_bookkeeping(folder: Path, existed: bool, before: set[str],
+                      made_parents: list[Path] = ()) -> None:
     """A command that failed before writing any output leaves the folder as it found it: the
-    lock file and argument record it added go, and so does the folder if it made it. Once real
+    lock file and argument record it added go, and so does the folder if it made it, and the
+    parents it made for it (`made_parents`, nearest first) while they are empty. Once real
     output exists, everything stays (the record is what a resume is checked against)."""
     added = set(os.listdir(folder)) - before
     if not added or not added <= {LOCK_NAME, ARGUMENTS_NAME}:
         return
     for name in added:
         (folder / name).unlink(missing_ok=True)
-    if not existed:
-        folder.rmdir()
+    if existed:
+        return
+    folder.rmdir()
+    for parent in made_parents:
+        try:
+            parent.rmdir()
+        except OSError:  # something else wrote there meanwhile (another command): it stays
+            return
 
 
 def changed_arguments(recorded: Mapping[str, Any], requested: Mapping[str, Any], *,
