@@ -66,6 +66,10 @@ def test_scale_report_with_real_ray_workers_and_no_process_left(tmp_path):
         # step count is off by far more.
         assert run["steps_per_s"] / 3 < run["trainer_logged_steps_per_s"] < 3 * run["steps_per_s"]
         assert run["worker_restarts"] == 0
+    assert results["in_process_env_steps_per_s"] > 0
+    assert results["worker_pace_ratio"] == [r["env_steps_per_s_per_worker"] /
+                                            results["in_process_env_steps_per_s"]
+                                            for r in results["runs"]]
     assert results["device"] == "cpu" and results["torch_threads"] == 1
     assert results["usable_cpus"] >= 1 and report["machine"]["cpu_count"] >= 1
     # Each run shut its Ray down: nothing it started is left (the reaper ends Ray's agents).
@@ -79,13 +83,16 @@ def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch)
     """The report's assembly, on made-up rates (no Ray): 1 is measured first even when not
     asked for, and efficiency is each count's rate per worker over the 1-worker rate."""
     rates = {1: 100.0, 2: 180.0, 4: 300.0}
+    paces = {1: 85.0, 2: 80.0, 4: 70.0}  # each worker's env steps/s while stepping
     measured = []
 
     def fake_measure(args, env_cfg, workers):
         measured.append(workers)
-        return {"workers": workers, "steps_per_s": rates[workers], "learner_share": 0.1 * workers}
+        return {"workers": workers, "steps_per_s": rates[workers], "learner_share": 0.1 * workers,
+                "env_steps_per_s_per_worker": paces[workers]}
 
     monkeypatch.setattr(scale, "measure", fake_measure)
+    monkeypatch.setattr(scale, "in_process_env_steps_per_s", lambda *a, **k: 100.0)
     path = tmp_path / "scale.json"
     assert main(["bench", "scale", "--report", str(path), "--workers", "4,2"]) == 0
     results = json.loads(path.read_text())["results"]
@@ -94,6 +101,9 @@ def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch)
     assert results["steps_per_s"] == [100.0, 180.0, 300.0]
     assert results["baseline_added"] and results["requested_workers"] == [4, 2]
     assert [r["efficiency"] for r in results["runs"]] == results["efficiency"]
+    # Each worker's pace against the in-process pace of the same envs, in worker-count order.
+    assert results["worker_pace_ratio"] == [0.85, 0.8, 0.7]
+    assert results["in_process_env_steps_per_s"] == 100.0
 
 
 def test_oversubscribed_counts_are_warned_about():

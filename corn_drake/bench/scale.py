@@ -19,6 +19,9 @@ inference for all envs, and the workers idle while it does that and the PPO upda
 learner_share = 1 - env_step_wait share. env_steps_per_s_per_worker (steps / env_step_wait / W)
 is the workers' own pace while stepping: flat across W with falling efficiency means the learner
 limits; falling too means the workers contend for cores (or memory bandwidth).
+worker_pace_ratio = that pace / the pace of the same --envs-per-worker envs stepped in this
+process with random actions (in_process_env_steps_per_s, measured in the same run): what the
+lock-step round trips cost a worker.
 
 Each run starts its own local Ray and shuts it down after (rl/ray_workers.init_ray ends what
 Ray leaves behind), unless Ray was already running in this process: then that one is used.
@@ -121,6 +124,27 @@ def measure(args, env_cfg, workers: int) -> dict:
     }
 
 
+def in_process_env_steps_per_s(env_cfg, envs: int, steps: int, seed: int = 0) -> float:
+    """Env steps/s (steps x envs) of `envs` envs stepped in this process with random actions:
+    the pace a worker's envs have with nothing between their steps, the baseline of
+    worker_pace_ratio."""
+    import time
+
+    import numpy as np
+
+    from corn_drake.contract import ACTION_DIM
+    from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+
+    batch = EnvBatch(EnvFactory(env_cfg, seed=seed), envs)
+    rng = np.random.default_rng(seed)
+    batch.reset()
+    batch.step(rng.uniform(-1, 1, (envs, ACTION_DIM)))  # warm-up: first-step caches
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        batch.step(rng.uniform(-1, 1, (envs, ACTION_DIM)))
+    return steps * envs / (time.perf_counter() - t0)
+
+
 def oversubscription_warnings(counts: list[int], usable_cpus: int) -> list[str]:
     """One line per worker count whose workers plus the learner need more cores than this
     process may use: their efficiency then measures the machine, not the code."""
@@ -163,15 +187,23 @@ def run(args) -> dict:
             runs.append(measure(args, env_cfg, workers))
             print(f"  {workers} workers: {runs[-1]['steps_per_s']:.0f} steps/s, learner share "
                   f"{runs[-1]['learner_share']:.2f}", flush=True)
+        # The same envs stepped in this process, as many steps as a worker takes per run.
+        in_process = in_process_env_steps_per_s(env_cfg, args.envs_per_worker,
+                                                args.updates * args.rollout_steps)
     baseline = runs[0]["steps_per_s"]
     efficiency = [r["steps_per_s"] / r["workers"] / baseline for r in runs]
     for r, e in zip(runs, efficiency):
         r["efficiency"] = e
+    # Each worker's own pace while stepping against the in-process pace of the same envs: what
+    # the round trips and the lock step cost a worker (1.0: nothing).
+    pace = [r["env_steps_per_s_per_worker"] / in_process for r in runs]
     return {
         "workers": counts,
         "efficiency": efficiency,
         "steps_per_s": [r["steps_per_s"] for r in runs],
         "learner_share": [r["learner_share"] for r in runs],
+        "worker_pace_ratio": pace,
+        "in_process_env_steps_per_s": in_process,
         "baseline_steps_per_s": baseline,
         "requested_workers": args.workers,
         # True when --workers left out 1: its run was added as the baseline.

@@ -25,6 +25,7 @@ pose-tracking errors (evaluation.tracking_summary).
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
@@ -170,7 +171,9 @@ def run(args) -> int:
         else:
             base, agent, env_steps = load_run_with_step(args.run, args.checkpoint)
             policy = base.policy
-            extra = {"env_steps": env_steps, "checkpoint": args.checkpoint or "last.pt"}
+            # The file the weights came from: prev.pt when last.pt was unusable.
+            extra = {"env_steps": env_steps,
+                     "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
         run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
         if args.attention and not getattr(agent, "has_attention", False):
@@ -197,19 +200,32 @@ def run(args) -> int:
               f"(trained with {trained_with})")
     meshcat = _open_meshcat() if args.keep_open else None
     # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
-    with torch_threads(args.torch_threads):
-        report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
-                          out_dir, stochastic=args.stochastic, attention=args.attention,
-                          meshcat=meshcat, progress=not args.no_progress)
-    report.update(extra)
-    report.update({"run": str(args.run), "policy": policy,
-                   "overrides": [dataclasses.asdict(change) for change in overrides],
-                   "split": args.split, "actions": "sampled" if args.stochastic else "mean"})
-    if args.objects:
-        from corn_drake.assets.library import object_groups
+    def complete_report(report: dict) -> dict:
+        report.update(extra)
+        report.update({"run": str(args.run), "policy": policy,
+                       "overrides": [dataclasses.asdict(change) for change in overrides],
+                       "split": args.split, "actions": "sampled" if args.stochastic else "mean",
+                       "library": _library_record(args, run_cfg.env)})
+        if args.objects:
+            from corn_drake.assets.library import object_groups
 
-        groups = object_groups(args.objects)
-        report["success_by_group"] = success_by_group(report["episodes"], groups)
+            groups = object_groups(args.objects)
+            report["success_by_group"] = success_by_group(report["episodes"], groups)
+        return report
+
+    try:
+        with torch_threads(args.torch_threads):
+            report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
+                              out_dir, stochastic=args.stochastic, attention=args.attention,
+                              meshcat=meshcat, progress=not args.no_progress)
+    except BaseException as e:  # noqa: BLE001 - an interrupt after some episodes: keep them
+        partial = getattr(e, "partial_report", None)
+        if partial is not None:
+            write_json(report_path, complete_report(partial))
+            print(f"partial report of {len(partial['episodes'])} of {args.episodes} episodes "
+                  f"(complete: false): {report_path}", file=sys.stderr)
+        raise
+    report = complete_report(report)
     write_json(report_path, report)
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {args.episodes} episodes; report {report_path}")
@@ -220,6 +236,19 @@ def run(args) -> int:
     if meshcat is not None:
         _wait_for_ctrl_c(meshcat)
     return 0
+
+
+def _library_record(args, env_cfg) -> dict | None:
+    """The object library the episodes came from, for the report: its path and the sha256 of
+    its manifest (None for a run on a primitive object), so a report says what it measured."""
+    import hashlib
+
+    library = args.objects or _whole_library(env_cfg.scene.object)
+    if not library:
+        return None
+    manifest = Path(library) / "manifest.json"
+    digest = hashlib.sha256(manifest.read_bytes()).hexdigest()
+    return {"path": str(library), "manifest_sha256": digest}
 
 
 def _open_meshcat():

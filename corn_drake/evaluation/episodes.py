@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from corn_drake.errors import InputError
+from corn_drake.evaluation.failures import failure_category, failure_counts, motion_summary
 
 
 @dataclasses.dataclass
@@ -31,6 +32,10 @@ class EpisodeResult:
     recording: Path | None = None
     # info["tracking"] of every step (StudentEnv: tracked vs true object pose), empty otherwise.
     tracking: list[dict] = dataclasses.field(default_factory=list)
+    # The object's pose ([p, q_wxyz]) at the start and the end, and the episode's goal.
+    start_pose: np.ndarray | None = None
+    end_pose: np.ndarray | None = None
+    goal_pose: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -53,6 +58,7 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
     if record_path is not None and env.meshcat is None:
         raise ValueError("run_episode: recording needs an env built with meshcat=Meshcat()")
     obs, info = env.reset(seed=seed)
+    start_pose = env.object_pose()
     if record_path is not None:
         env.meshcat.StartRecording(set_visualizations_while_recording=False)
     total, steps, status, error, tracking = 0.0, 0, info.get("status", {}), None, []
@@ -74,7 +80,8 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
         env.meshcat.StopRecording()
         recording = save_recording(env.meshcat, record_path)
     return EpisodeResult(steps=steps, total_reward=total, status=status, sim_error=error,
-                         recording=recording, tracking=tracking)
+                         recording=recording, tracking=tracking, start_pose=start_pose,
+                         end_pose=env.object_pose(), goal_pose=np.asarray(env.episode.goal_pose))
 
 
 def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int | None = None,
@@ -145,7 +152,10 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
 
     Returns the report: task (the task's name), action_step (controller.max_position_delta,
     the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
-    objects), per_object, mean_episode_length and one row per episode. A student's report adds
+    objects), per_object, mean_episode_length, failure_counts (evaluation/failures.py), complete
+    and episodes_requested, and one row per episode (its failure category and the object's
+    motion among its keys). Interrupted (Ctrl-C, SIGTERM) after some episodes, the interrupt
+    goes on up carrying the report of the finished ones, complete false, as .partial_report. A student's report adds
     perception (its segmentation: "geometric" or "ground_truth"), tracking (tracking_summary
     over every step of every episode) and each row's tracking (that episode's summary).
     """
@@ -167,27 +177,40 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     per_object, rows, tracked = defaultdict(list), [], []
     envs = {}
     bar = tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress)
-    for k in range(episodes):
-        object_id, spec = objects[k % len(objects)]
-        if object_id not in envs:
-            envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed, attention)
-        env = envs[object_id]
-        path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
-        episode_seed_k = episode_seed(seed, object_id, k // len(objects))
-        result = run_episode(env, seed=episode_seed_k, record_path=path)
-        per_object[object_id].append(result.success)
-        rows.append({"episode": k, "object": object_id, "seed": episode_seed_k,
-                     "success": result.success,
-                     "steps": result.steps, "return": result.total_reward,
-                     "position_error": result.status.get("position_error"),
-                     "orientation_error": result.status.get("orientation_error"),
-                     "sim_error": result.sim_error,
-                     "recording": None if result.recording is None else str(result.recording)})
-        if isinstance(env, StudentEnv):  # the student's pose tracking is part of its result
-            rows[-1]["tracking"] = tracking_summary(result.tracking)
-            tracked += result.tracking
-        bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
-        bar.update()
+    interrupted = None
+    try:
+        for k in range(episodes):
+            object_id, spec = objects[k % len(objects)]
+            if object_id not in envs:
+                envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed, attention)
+            env = envs[object_id]
+            path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
+            episode_seed_k = episode_seed(seed, object_id, k // len(objects))
+            result = run_episode(env, seed=episode_seed_k, record_path=path)
+            per_object[object_id].append(result.success)
+            rows.append({"episode": k, "object": object_id, "seed": episode_seed_k,
+                         "success": result.success,
+                         "steps": result.steps, "return": result.total_reward,
+                         "position_error": result.status.get("position_error"),
+                         "orientation_error": result.status.get("orientation_error"),
+                         "sim_error": result.sim_error,
+                         "out_of_workspace": bool(result.status.get("out_of_workspace", 0) > 0),
+                         "motion": motion_summary(result.start_pose, result.end_pose,
+                                                  result.goal_pose),
+                         "recording": (None if result.recording is None
+                                       else str(result.recording))})
+            rows[-1]["failure"] = failure_category(rows[-1], env.teacher_cfg.task)
+            if isinstance(env, StudentEnv):  # the student's pose tracking is part of its result
+                rows[-1]["tracking"] = tracking_summary(result.tracking)
+                tracked += result.tracking
+            bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
+            bar.update()
+    except BaseException as e:  # noqa: BLE001 - Ctrl-C, SIGTERM (cli.Interrupted), not errors
+        if isinstance(e, Exception) or not rows:
+            raise
+        # The episodes finished so far make a report, marked partial; the caller writes it
+        # (e.partial_report) and the interrupt goes on up.
+        interrupted = e
     bar.close()
     rates = {o: float(np.mean(s)) for o, s in per_object.items()}
     teacher_cfg = env.teacher_cfg
@@ -197,9 +220,14 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
               "balanced_success_rate": float(np.mean(list(rates.values()))),
               "per_object": rates,
               "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
+              "failure_counts": failure_counts(rows),
+              "complete": interrupted is None, "episodes_requested": episodes,
               "episodes": rows}
     if isinstance(env, StudentEnv):
         report.update({"perception": env.perception, "tracking": tracking_summary(tracked)})
+    if interrupted is not None:
+        interrupted.partial_report = report
+        raise interrupted
     return report
 
 

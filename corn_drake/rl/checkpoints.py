@@ -6,7 +6,7 @@ from pathlib import Path
 
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import MissingInputError, load_error_detail
-from corn_drake.storage.checkpoint_files import load_checkpoint
+from corn_drake.storage.checkpoint_files import load_checkpoint, load_checkpoint_and_file
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.run_folders.config_file import load_run_config
@@ -49,12 +49,14 @@ def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[Train
             kept = ", ".join(run_snapshots(run_dir)) or "none"
             raise MissingInputError(f"--checkpoint {checkpoint!r}: no such file in "
                                     f"{run_dir / 'checkpoints'} (kept snapshots: {kept})")
-        state = load_checkpoint(ckpt, required=("agent",), fallback=False)
+        loaded = load_checkpoint_and_file(ckpt, required=("agent",), fallback=False)
     else:
         ckpt = run_dir / "checkpoints" / "last.pt"
-        state = load_checkpoint(ckpt, required=("agent",))  # falls back to prev.pt if need be
-    if state is None:
+        # Falls back to prev.pt if need be.
+        loaded = load_checkpoint_and_file(ckpt, required=("agent",))
+    if loaded is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
+    state, used = loaded
     encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
     # Runs from before feature normalisation existed hold no feature_normalizer: their
     # checkpoint, not today's default, says how their network was built.
@@ -63,6 +65,8 @@ def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[Train
                          normalize_features=normalize)
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
+    # The file the weights came from: prev.pt when last.pt was unusable (load_checkpoint).
+    agent.checkpoint_file = used.name
     return cfg, agent, int(state.get("global_step", 0))
 
 

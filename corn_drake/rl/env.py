@@ -89,6 +89,11 @@ class DiagramEnv(gym.Env):
         """The plant's context inside the simulator's root context."""
         return self._plant_context
 
+    def object_pose(self) -> np.ndarray:
+        """The object's pose in the world now, as [p, q_wxyz] (for reports: where it ended)."""
+        X = self.scene.plant.EvalBodyPoseInWorld(self._plant_context, self.scene.object_body)
+        return np.concatenate([X.translation(), X.rotation().ToQuaternion().wxyz()])
+
     @property
     def policy_in_diagram(self) -> bool:
         """Whether a PolicySystem inside the diagram acts (then step() takes no action)."""

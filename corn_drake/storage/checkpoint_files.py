@@ -74,7 +74,16 @@ def _read_checkpoint(path: Path, required: tuple[str, ...]) -> dict:
 
 def load_checkpoint(path: str | os.PathLike, required: tuple[str, ...] = (),
                     fallback: bool = True) -> dict | None:
-    """The state saved by save_checkpoint at `path`, or None when there is none to resume.
+    """The state saved by save_checkpoint at `path` (load_checkpoint_and_file's state)."""
+    loaded = load_checkpoint_and_file(path, required, fallback)
+    return None if loaded is None else loaded[0]
+
+
+def load_checkpoint_and_file(path: str | os.PathLike, required: tuple[str, ...] = (),
+                             fallback: bool = True) -> tuple[dict, Path] | None:
+    """(the state saved by save_checkpoint at `path`, the file it was read from: `path`, or
+    prev.pt beside it after a fallback, so a report can say which it measured), or None when
+    there is none to resume.
 
     An unreadable latest checkpoint falls back to prev.pt with a warning on stderr (not with
     fallback=False: a named snapshot is that step or nothing); when no checkpoint there can be
@@ -97,8 +106,8 @@ def load_checkpoint(path: str | os.PathLike, required: tuple[str, ...] = (),
             problems.append(f"{candidate}: {e}")
             continue
         if candidate != path:
-            reason = problems[0] if problems else f"{path}: missing"
+            reason = " ".join((problems[0] if problems else f"{path}: missing").split())
             print(f"warning: checkpoint unusable ({reason}); using the previous checkpoint "
                   f"{candidate}", file=sys.stderr)
-        return state
+        return state, candidate
     raise InputError("no readable checkpoint: " + "; ".join(problems))
