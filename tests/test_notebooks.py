@@ -1,6 +1,16 @@
 """Executes the notebooks in notebooks/ that need no prepared data (each must run clean), and
-checks that the plotting ones show their figures inline."""
+checks that the plotting ones show their figures inline.
 
+The notebooks are committed with their outputs, so they read on a code host without being run.
+Each run checks that the committed outputs are still what the code makes: per code cell, the
+kinds of output it shows (figures, tables, printed text) must match what this run produced,
+and no committed cell may hold an error. After changing a notebook or what it shows, refresh
+the committed outputs with
+
+    CORN_DRAKE_WRITE_NOTEBOOKS=1 .venv/bin/python -m pytest tests/test_notebooks.py -m ""
+"""
+
+import os
 from pathlib import Path
 
 import nbformat
@@ -32,6 +42,27 @@ def _image_outputs(nb) -> int:
                for out in cell.get("outputs", []))
 
 
+def _output_kinds(nb) -> list[list[str]]:
+    """Per code cell, the kinds of output it shows: each figure, table or value's MIME types, and
+    whether it printed to stdout. stderr (progress bars, library warnings) varies by machine and
+    is left out; a committed error output never matches a clean run."""
+    kinds = []
+    for cell in nb.cells:
+        if cell.cell_type != "code":
+            continue
+        shown = []
+        for out in cell.get("outputs", []):
+            if out["output_type"] in ("display_data", "execute_result"):
+                shown.append("+".join(sorted(out.get("data", {}))))
+            elif out["output_type"] == "stream" and out.get("name") == "stdout":
+                if "stdout" not in shown:
+                    shown.append("stdout")
+            elif out["output_type"] == "error":
+                shown.append(f"error: {out.get('ename')}")
+        kinds.append(shown)
+    return kinds
+
+
 def _text_outputs(nb) -> str:
     return "\n".join(str(out.get("text", "")) + str(out.get("data", {}).get("text/markdown", ""))
                      for cell in nb.cells if cell.cell_type == "code"
@@ -50,9 +81,17 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     # A non-interactive default backend, as a headless user's environment may set: figures
     # still appear inline only if the notebook itself asks for the inline backend.
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    nb = nbformat.read(REPO_ROOT / "notebooks" / name, as_version=4)
-    NotebookClient(nb, timeout=600, kernel_name="python3",
+    path = REPO_ROOT / "notebooks" / name
+    committed = nbformat.read(path, as_version=4)
+    nb = nbformat.read(path, as_version=4)
+    # No per-cell timestamps: the committed file changes only where the outputs do.
+    NotebookClient(nb, timeout=600, kernel_name="python3", record_timing=False,
                    resources={"metadata": {"path": str(REPO_ROOT)}}).execute()
+    if os.environ.get("CORN_DRAKE_WRITE_NOTEBOOKS") == "1":
+        nbformat.write(nb, path)
+    else:
+        assert _output_kinds(committed) == _output_kinds(nb), (
+            f"{name}: its committed outputs are stale (see this module's docstring to refresh)")
     if name in RECORDING_NOTEBOOKS:
         outputs = list(Path(tmp_path).glob("*.html"))
         assert outputs and all(p.stat().st_size > 10_000 for p in outputs)
