@@ -3,8 +3,19 @@
 80 % of drops start in a uniformly random orientation, 20 % in canonical ones (each principal
 axis up or down), from 0.2 m above the table. A drop counts when the object stays still for 10
 consecutive physics steps and its centre of mass projects inside its support polygon (the hull
-vertices touching the table). Poses are deduplicated modulo yaw by the gravity direction in the
-object frame and stored canonicalised: yaw removed, above (0, 0), table top at z = 0.4.
+vertices touching the table).
+
+A drop only says which face of the object's convex hull it came to rest on; the pose stored is
+computed from that face alone (canonical_pose), never taken from the simulation. The simulated
+rest is a transient (still means slower than a threshold) whose last digits, and on a rocking
+object its first few, differ between CPUs and builds (measured: a 1e-12 m change in the drop
+height moved an upright bottle's stored rest by 8e-4), so a library built elsewhere started its
+episodes from other poses. Faces are grouped once, from the hull geometry only, into clusters
+at least `duplicate_angle` apart (largest face first); a drop resting on any face of a cluster
+gives that cluster's pose: its largest face down, yaw removed, above (0, 0), lowest hull vertex
+on the table top (z = 0.4), quaternion and height rounded to a 1e-9 grid that the ~1e-16
+differences left by the arithmetic cannot cross in practice. Poses are stored in the faces'
+order.
 
 A pose is kept only if, placed exactly as stored, it holds for 1 s under two contact settings:
 the training one (rigid hulls on a compliant table, 12.5 ms steps) and a finer one (compliant
@@ -28,7 +39,12 @@ from scipy.spatial import ConvexHull, Delaunay
 from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
-from corn_drake.transforms import yaw_matrix
+from corn_drake.transforms import quat_wxyz_to_matrix, yaw_matrix
+
+# Stored quaternions and heights lie on this grid: the canonical pose's arithmetic (BLAS, libm's
+# sin/cos, which CPUs dispatch to different kernels) differs between machines by ~1e-16, which
+# lands across a grid boundary with a chance of ~1e-7 per value.
+GRID_DECIMALS = 9
 
 
 @dataclasses.dataclass
@@ -41,7 +57,11 @@ class DropConfig:
     still_linear: float = 2e-3  # m/s
     still_angular: float = 2e-2  # rad/s
     support_tolerance: float = 2e-3  # hull vertices this close to the table support the object
-    duplicate_angle: float = 0.1  # rad between gravity directions of distinct poses
+    duplicate_angle: float = 0.1  # rad between the down faces of distinct poses
+    # A rest whose gravity direction is farther than this from every hull face's normal is not a
+    # rest on a face (3+ vertices on the table); a thin plate rests ~0.03 rad tilted, sunk in the
+    # compliant table.
+    face_angle: float = 0.1
     # Half the tolerance the library promises (1 cm, 0.05 rad over 1 s), so stored poses pass it.
     verify_time: float = 1.0
     verify_position: float = 0.005
@@ -92,6 +112,56 @@ def _remove_yaw(R: np.ndarray) -> np.ndarray:
     return yaw_matrix(-np.arctan2(axis[1], axis[0])) @ R
 
 
+@dataclasses.dataclass(frozen=True)
+class HullFaces:
+    """The faces of the convex hull of an object's hull vertices, in canonical order (largest
+    area first), and for each the index of the face whose pose a rest on it gives."""
+    normals: np.ndarray  # (F, 3) outward unit normals in the object frame
+    cluster: np.ndarray  # (F,) int
+
+    def face_of(self, down: np.ndarray, max_angle: float) -> int | None:
+        """The face whose normal is nearest the object-frame `down` direction, or None when
+        none is within `max_angle`."""
+        cosines = self.normals @ down
+        face = int(np.argmax(cosines))
+        return face if cosines[face] >= np.cos(max_angle) else None
+
+
+def hull_faces(vertices: np.ndarray, duplicate_angle: float) -> HullFaces:
+    """Faces from the geometry alone (identical vertices give identical faces on any machine),
+    clustered greedily: a face joins the first larger face within `duplicate_angle`."""
+    hull = ConvexHull(vertices)
+    # Qhull triangulates a merged face into triangles sharing its hyperplane exactly, so equal
+    # normals are one face.
+    normals, inverse = np.unique(hull.equations[:, :3], axis=0, return_inverse=True)
+    tri = vertices[hull.simplices]
+    tri_area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = np.bincount(inverse.ravel(), weights=tri_area, minlength=len(normals))
+    # Rounded keys, so that faces of equal area (a box's opposite sides) are ordered by their
+    # normals rather than by their areas' last bits.
+    keys = np.round(normals, GRID_DECIMALS)
+    order = np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0], -np.round(area, 12)))
+    normals = normals[order] / np.linalg.norm(normals[order], axis=1, keepdims=True)
+    cos_dup, reps = np.cos(duplicate_angle), []
+    cluster = np.empty(len(normals), dtype=int)
+    for i, n in enumerate(normals):
+        cluster[i] = next((r for r in reps if normals[r] @ n > cos_dup), i)
+        if cluster[i] == i:
+            reps.append(i)
+    return HullFaces(normals, cluster)
+
+
+def canonical_pose(down: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """The stored pose (7,) of the object resting with the object-frame unit vector `down`
+    pointing down: yaw removed, above (0, 0), lowest vertex on the table top, on the grid."""
+    R = _remove_yaw(_rotation_taking(np.asarray(down, float), np.array([0.0, 0.0, -1.0])))
+    q = _wxyz(R)
+    q = -q if q[np.flatnonzero(np.abs(q) > 1e-6)[0]] < 0 else q  # q and -q: the same rotation
+    q = np.round(q, GRID_DECIMALS) + 0.0  # + 0.0 turns -0.0 into 0.0
+    z = TABLE_TOP_Z - (vertices @ quat_wxyz_to_matrix(q).T)[:, 2].min()
+    return np.array([0.0, 0.0, np.round(z, GRID_DECIMALS), *q]) + 0.0
+
+
 def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Generator,
                       cfg: DropConfig = DropConfig(), scene_cfg: SceneConfig | None = None):
     """(poses (K, 7), stats). `vertices` are the hulls' vertices in the object frame."""
@@ -102,7 +172,8 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
     h = scene_cfg.physics.time_step
     canonical = _canonical_rotations()
     n_canonical = int(round(cfg.drops * cfg.canonical_fraction))
-    kept_R, kept_z, settled, supported, failed = [], [], 0, 0, 0
+    faces = hull_faces(vertices, cfg.duplicate_angle)
+    reached, settled, supported, off_face, failed = set(), 0, 0, 0, 0
     for i in range(cfg.drops):
         R0 = canonical[i % len(canonical)] if i < n_canonical else _random_rotation(rng)
         ctx.SetTimeStateAndParametersFrom(default)
@@ -135,13 +206,13 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
         if len(contact) < 3 or not _inside_polygon(com[:2], contact):
             continue
         supported += 1
-        g = R.T @ np.array([0.0, 0.0, -1.0])  # gravity in the object frame
-        if any(np.arccos(np.clip(g @ (Rk.T @ [0, 0, -1.0]), -1, 1)) < cfg.duplicate_angle
-               for Rk in kept_R):
+        face = faces.face_of(R.T @ np.array([0.0, 0.0, -1.0]), cfg.face_angle)
+        if face is None:
+            off_face += 1
             continue
-        kept_R.append(_remove_yaw(R))
-        kept_z.append(p[2])
-    candidates = [np.array([0.0, 0.0, z, *_wxyz(R)]) for R, z in zip(kept_R, kept_z)]
+        reached.add(int(faces.cluster[face]))
+    # In the faces' canonical order, so the stored order (which seeded draws index) is too.
+    candidates = [canonical_pose(faces.normals[c], vertices) for c in sorted(reached)]
     # A drop can come to rest on a knife edge; keep only poses that, placed exactly as stored,
     # stay within verify_position / verify_angle for verify_time, in both contact settings. The
     # finer setting costs ~10x more per simulated second, so it sees only the first one's poses.
@@ -152,7 +223,7 @@ def find_stable_poses(spec: ObjectSpec, vertices: np.ndarray, rng: np.random.Gen
     poses = [p for p in held if second.holds(_touching(p, vertices), cfg.verify_time,
                                              cfg.second_position, cfg.second_angle)]
     return np.array(poses).reshape(-1, 7), {
-        "drops": cfg.drops, "settled": settled, "supported": supported,
+        "drops": cfg.drops, "settled": settled, "supported": supported, "off_face": off_face,
         "unique": len(candidates), "verified": len(held), "held_second_setting": len(poses),
         "solver_failures": failed, "second_setting_s": time.perf_counter() - t_second}
 
