@@ -17,7 +17,9 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
 - card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
   `evaluate` report of this very run on the unseen split, kept in docs/results/), the
   `library_command` that rebuilds those objects and the `library_seed`, `evaluate_command`,
-  `train_command` (as given), `source_run`, and the file sizes.
+  `train_command` (as given), `source_run`, the file sizes, and the content hash of the
+  library at the library command's --out (`library_content_hash`, with each object's in
+  `library_object_hashes`: `evaluate` warns when a library differs from it).
 
 The report must be of this run or of OUT (its `run` field: the same weights), on unseen objects
 and without overrides, so a card cannot quote another policy's or another task's number; a
@@ -104,6 +106,11 @@ def run(args) -> int:
     if kind == "distill" and "perception" not in report:
         raise InputError(f"--report {args.report} records no perception chain; a student's card "
                          "quotes an evaluation through it")
+    from corn_drake.shipped_card import library_card_fields
+
+    # Before OUT is made: the library must be on this machine to record what it holds (a
+    # refused ship leaves nothing behind).
+    library_fields = library_card_fields(library["--out"])
     ship = _ship_student if kind == "distill" else _ship_teacher
     shipped = ship(run_dir, out, library["--out"])
     card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
@@ -116,7 +123,7 @@ def run(args) -> int:
                                  f"{library['--out']} --split unseen --episodes "
                                  f"{len(report['episodes'])} --report eval.json"),
             "train_command": args.train_command, "source_run": str(args.run),
-            "actions": report.get("actions", "mean"), **shipped}
+            "actions": report.get("actions", "mean"), **shipped, **library_fields}
     if kind == "distill":
         card["perception"] = report["perception"]
     card["bytes"] = {p.relative_to(out).as_posix(): p.stat().st_size
