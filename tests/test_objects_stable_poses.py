@@ -2,6 +2,7 @@
 reported."""
 
 import numpy as np
+import pytest
 import trimesh
 
 from corn_drake.assets.hulls import obj_text
@@ -93,3 +94,25 @@ def test_kept_fraction_is_the_share_of_training_poses_the_second_setting_keeps()
     lines = _stable_pose_summary(objects)
     assert lines[0].startswith("stable poses holding under both contact settings: 9 of the 10")
     assert lines[1:] == ["  stool: kept 3 of 4 (75%)"]  # only objects that lost poses are listed
+
+
+def test_stored_poses_do_not_follow_the_simulations_last_digits(tmp_path, monkeypatch):
+    """Another CPU or build changes the drops' floating point; emulated by starting every drop
+    1e-9 m higher. The stored poses come from the hull faces the drops rest on, so they are
+    the same arrays, on the 1e-9 grid, each with its lowest vertex on the table top."""
+    from corn_drake.assets import stable_poses
+    from corn_drake.scene.objects import TABLE_TOP_Z
+    from corn_drake.transforms import quat_wxyz_to_matrix
+
+    spec, vertices = _stool(tmp_path)
+    cfg = DropConfig(drops=30, height=0.005)
+    poses, _ = find_stable_poses(spec, vertices, np.random.default_rng(0), cfg)
+    exact = stable_poses.RigidTransform
+    monkeypatch.setattr(stable_poses, "RigidTransform",
+                        lambda R, p: exact(R, np.asarray(p, float) + [0.0, 0.0, 1e-9]))
+    again, _ = find_stable_poses(spec, vertices, np.random.default_rng(0), cfg)
+    assert len(poses) == 5 and np.array_equal(poses, again)
+    assert np.array_equal(poses, np.round(poses, stable_poses.GRID_DECIMALS))
+    for p in poses:
+        lowest = (vertices @ quat_wxyz_to_matrix(p[3:]).T)[:, 2].min() + p[2]
+        assert lowest == pytest.approx(TABLE_TOP_Z, abs=2e-9)

@@ -39,6 +39,8 @@ def object_hash(library: str | Path, obj: LibraryObject) -> str:
     for field in FILE_FIELDS:
         value = getattr(obj, field)
         for rel in [value] if isinstance(value, str) else value or []:
+            if not rel:  # a hand-written library may name no file ("")
+                continue
             path = library / rel
             try:
                 data = path.read_bytes()

@@ -59,9 +59,9 @@ class DropConfig:
     support_tolerance: float = 2e-3  # hull vertices this close to the table support the object
     duplicate_angle: float = 0.1  # rad between the down faces of distinct poses
     # A rest whose gravity direction is farther than this from every hull face's normal is not a
-    # rest on a face (3+ vertices on the table); a thin plate rests ~0.03 rad tilted, sunk in the
-    # compliant table.
-    face_angle: float = 0.1
+    # rest on a face. Rests on the compliant table are tilted: a thin plate by ~0.03 rad, a stool
+    # whose legs sink unequally by 0.102 rad (measured, tests/test_objects_stable_poses.py).
+    face_angle: float = 0.2
     # Half the tolerance the library promises (1 cm, 0.05 rad over 1 s), so stored poses pass it.
     verify_time: float = 1.0
     verify_position: float = 0.005
