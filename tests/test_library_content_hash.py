@@ -1,6 +1,6 @@
 """A library's content hash (assets/content_hash.py) and what a shipped card does with it
-(shipped_card.py): `evaluate` names the card's library command when the library is missing, and
-warns when the library's objects are not the card's."""
+(evaluation/shipped_card.py): `evaluate` names the card's library command when the library is
+missing, and warns when the library's objects are not the card's."""
 
 import io
 import json
@@ -11,7 +11,7 @@ import pytest
 from corn_drake.assets.content_hash import library_content_hash, object_hashes
 from corn_drake.assets.manifest import read_manifest, write_manifest
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.shipped_card import library_card_fields, require_library, warn_if_other_library
+from corn_drake.evaluation.shipped_card import library_card_fields, require_library, warn_if_other_library
 from tests.fixtures import write_loadable_library
 
 COMMAND = "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen"

@@ -91,7 +91,7 @@ def _object_specs(args, cfg):
         return [(cfg.scene.object.object_id or cfg.scene.object.kind,
                  object_spec_from_config(cfg.scene.object, cfg.seed))]
     from corn_drake.assets.library import list_objects, load_object_spec
-    from corn_drake.shipped_card import require_library, warn_if_other_library
+    from corn_drake.evaluation.shipped_card import require_library, warn_if_other_library
 
     # A shipped folder's card: a missing library names the command that builds it; another
     # library than the card's gets a warning (its episodes cannot match the card's report).

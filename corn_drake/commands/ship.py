@@ -17,9 +17,7 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
 - card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
   `evaluate` report of this very run on the unseen split, kept in docs/results/), the
   `library_command` that rebuilds those objects and the `library_seed`, `evaluate_command`,
-  `train_command` (as given), `source_run`, the file sizes, and the content hash of the
-  library at the library command's --out (`library_content_hash`, with each object's in
-  `library_object_hashes`: `evaluate` warns when a library differs from it).
+  `train_command` (as given), `source_run`, and the file sizes.
 
 The report must be of this run or of OUT (its `run` field: the same weights), on unseen objects
 and without overrides, so a card cannot quote another policy's or another task's number; a
@@ -106,7 +104,7 @@ def run(args) -> int:
     if kind == "distill" and "perception" not in report:
         raise InputError(f"--report {args.report} records no perception chain; a student's card "
                          "quotes an evaluation through it")
-    from corn_drake.shipped_card import library_card_fields
+    from corn_drake.evaluation.shipped_card import library_card_fields
 
     # Before OUT is made: the library must be on this machine to record what it holds (a
     # refused ship leaves nothing behind).

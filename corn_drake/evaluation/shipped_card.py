@@ -1,11 +1,14 @@
 """What a shipped weights folder's card.json says about its object library, and the checks
 `evaluate` makes with it.
 
-`ship` records the library's content hash (assets/content_hash.py) and each object's, so that
-`evaluate --run <shipped folder>` can say when the library it is given is not the one the card's
-numbers were measured on (another machine's build, another seed, an older version of the
-builder): the episodes then differ from the card's report, and the user should know why before
-comparing numbers.
+`ship` records on the card the content hash (assets/content_hash.py) of the library at the
+library command's --out (`library_content_hash`) and each object's (`library_object_hashes`), so
+that `evaluate --run <shipped folder>` can say when the library it is given is not the one the
+card's numbers were measured on (another seed, an older version of the builder): the episodes
+then differ from the card's report, and the user should know why before comparing numbers.
+
+Lives in evaluation/ (not at the package root, which holds only the modules every floor shares)
+because `evaluate` is what reads it; `ship` (a command, above) writes the fields.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ def library_card_fields(library: str | Path) -> dict:
 def _card(run: str | Path) -> dict | None:
     """The card of a shipped weights folder, None for anything else (a run folder, a reference
     controller's name)."""
-    from corn_drake.io_utils import read_json
+    from corn_drake.storage.atomic_files import read_json
 
     path = Path(run) / CARD
     return read_json(path, "weights card") if path.is_file() else None
