@@ -38,6 +38,12 @@ def normalise(mesh: trimesh.Trimesh, radius: float) -> trimesh.Trimesh:
     return mesh
 
 
+def obj_vertices(text: str) -> np.ndarray:
+    """The (N, 3) vertices of OBJ text."""
+    rows = [line.split()[1:4] for line in text.splitlines() if line.startswith("v ")]
+    return np.array(rows, dtype=float).reshape(-1, 3)
+
+
 def _write_obj(path: Path, mesh: trimesh.Trimesh) -> None:
     write_text(path, obj_text(mesh))
 
@@ -104,8 +110,10 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
                       com=np.zeros(3), cloud=cloud, stable_poses=np.zeros((0, 7)), radius=radius,
                       bbox_corners=corners, hull_paths=hull_paths)
     t_drop = time.perf_counter()
-    poses, drop_stats = find_stable_poses(spec, np.concatenate([h.vertices for h in hulls]), rng,
-                                          cfg.drops)
+    # The vertices as written (what Drake and every later reader load), not the in-memory
+    # floats they were printed from: the poses are computed from exactly the library's files.
+    vertices = np.concatenate([obj_vertices(text) for text, _ in checked])
+    poses, drop_stats = find_stable_poses(spec, vertices, rng, cfg.drops)
     timings["stable_poses_s"] = time.perf_counter() - t_drop
     timings["second_setting_s"] = drop_stats["second_setting_s"]
     save_npy(folder / "stable_poses.npy", poses)

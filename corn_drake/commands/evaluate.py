@@ -106,10 +106,15 @@ def _object_specs(args, cfg):
         return [(cfg.scene.object.object_id or cfg.scene.object.kind,
                  object_spec_from_config(cfg.scene.object, cfg.seed))]
     from corn_drake.assets.library import list_objects, load_object_spec
+    from corn_drake.evaluation.shipped_card import require_library, warn_if_other_library
 
+    # A shipped folder's card: a missing library names the command that builds it; another
+    # library than the card's gets a warning (its episodes cannot match the card's report).
+    require_library(args.run, library, given=bool(args.objects))
     ids = list_objects(library, None if args.split == "all" else args.split)
     if not ids:
         raise InputError(f"no {args.split} objects in library {library}")
+    warn_if_other_library(args.run, library, ids)
     return [(i, load_object_spec(library, i)) for i in ids]
 
 

@@ -104,6 +104,11 @@ def run(args) -> int:
     if kind == "distill" and "perception" not in report:
         raise InputError(f"--report {args.report} records no perception chain; a student's card "
                          "quotes an evaluation through it")
+    from corn_drake.evaluation.shipped_card import library_card_fields
+
+    # Before OUT is made: the library must be on this machine to record what it holds (a
+    # refused ship leaves nothing behind).
+    library_fields = library_card_fields(library["--out"])
     ship = _ship_student if kind == "distill" else _ship_teacher
     shipped = ship(run_dir, out, library["--out"])
     card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
@@ -116,7 +121,7 @@ def run(args) -> int:
                                  f"{library['--out']} --split unseen --episodes "
                                  f"{len(report['episodes'])} --report eval.json"),
             "train_command": args.train_command, "source_run": str(args.run),
-            "actions": report.get("actions", "mean"), **shipped}
+            "actions": report.get("actions", "mean"), **shipped, **library_fields}
     if kind == "distill":
         card["perception"] = report["perception"]
     card["bytes"] = {p.relative_to(out).as_posix(): p.stat().st_size
