@@ -45,7 +45,7 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     assert main(argv) == 0
 
     objects = json.loads((tmp_path / "library" / "manifest.json").read_text())["objects"]
-    assert len(objects) == args.objects
+    assert len(objects) == args.num_objects
     unseen = {o["id"] for o in objects if o["split"] == "unseen"}
     assert unseen and len(unseen) < len(objects)
 
