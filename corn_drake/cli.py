@@ -64,10 +64,6 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
-def _interrupt(signum, frame):
-    raise Interrupted(signum)
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     debug = args.debug or os.environ.get("CORN_DRAKE_DEBUG", "") not in ("", "0")
@@ -77,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         interrupted.append(signum)
         if signum == signal.SIGINT:  # as Python's own handler: code that waits for Ctrl-C
             raise KeyboardInterrupt  # (evaluate --keep-open) catches it
-        _interrupt(signum, frame)
+        raise Interrupted(signum)
 
     handlers = _install(on_signal)
     try:

@@ -14,6 +14,7 @@ import math
 
 from pydrake.systems.sensors import CameraConfig
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.config.choices import CAMERA_MODES, SEGMENTATION_MODES  # noqa: F401 (re-exported)
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.yaml_io import pickle_as_yaml
@@ -60,13 +61,6 @@ pickle_as_yaml(CameraConfig)
 def _check_point(name: str, value) -> None:
     if len(value) != 3 or not all(math.isfinite(v) for v in value):
         raise InputError(f"{name} must be 3 finite numbers (x, y, z in metres), got {value}")
-
-
-def _check_positive(prefix: str, obj, names) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not value > 0:  # also rejects NaN
-            raise InputError(f"{prefix}.{name} must be > 0, got {value}")
 
 
 def _same_value(a, b) -> bool:
@@ -117,8 +111,11 @@ class CameraRigConfig:
     # renderer did: it rasterised the object only). Off by default: our links are primitives
     # (cheap to render) and the segmentation is supposed to remove them.
     hide_robot: bool = False
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"tracking_fov_margin": "> 0"}
 
     def check(self) -> None:
+        check_bounds(self, "cameras.")
         if self.mode not in CAMERA_MODES:
             raise InputError(f"cameras.mode must be one of {', '.join(CAMERA_MODES)}, "
                              f"got {self.mode!r}")
@@ -127,7 +124,6 @@ class CameraRigConfig:
         for i, eye in enumerate(self.eyes):
             _check_point(f"cameras.eyes[{i}]", eye)
         _check_point("cameras.look_at", self.look_at)
-        _check_positive("cameras", self, ("tracking_fov_margin",))
         check_camera(self.camera)
 
 
@@ -171,23 +167,21 @@ class SegmentationConfig:
     # eps are set for that density: a 640 x 480 rig took 1 s per frame without it.
     max_px_per_m: float = 250.0
     seed: int = 0
+    # Range checks (config/bounds.py): what check_bounds refuses. outlier_neighbours is a count
+    # (0 or 1 keeps every point).
+    BOUNDS = {"num_points": ">= 1", "crop_height": "> 0", "outlier_radius": "> 0",
+              "outlier_reference_px_per_m": "> 0", "outlier_neighbours": ">= 0",
+              "dbscan_eps": "> 0", "dbscan_min_eps_pixels": ">= 0", "dbscan_min_points": ">= 1",
+              "max_px_per_m": "> 0"}
 
     def check(self) -> None:
+        check_bounds(self, "segmentation.")
         if self.mode not in SEGMENTATION_MODES:
             raise InputError(f"segmentation.mode must be one of {', '.join(SEGMENTATION_MODES)}, "
                              f"got {self.mode!r}")
         if self.outlier_scaling not in OUTLIER_SCALINGS:
             raise InputError(f"segmentation.outlier_scaling must be one of "
                              f"{', '.join(OUTLIER_SCALINGS)}, got {self.outlier_scaling!r}")
-        if self.outlier_neighbours < 0:
-            raise InputError(f"segmentation.outlier_neighbours must be >= 0 (a neighbour count), "
-                             f"got {self.outlier_neighbours}")
-        if self.dbscan_min_eps_pixels < 0:
-            raise InputError(f"segmentation.dbscan_min_eps_pixels must be >= 0, "
-                             f"got {self.dbscan_min_eps_pixels}")
-        _check_positive("segmentation", self, (
-            "num_points", "crop_height", "outlier_radius", "outlier_reference_px_per_m",
-            "dbscan_eps", "dbscan_min_points", "max_px_per_m"))
 
 
 @dc.dataclass
@@ -209,17 +203,15 @@ class TrackerConfig:
     max_step_translation: float = 0.05
     max_step_rotation_deg: float = 30.0
     min_points: int = 20
+    # Range checks (config/bounds.py): what check_bounds refuses. The fitnesses are fractions of
+    # points.
+    BOUNDS = {"max_points": ">= 1", "normal_radius": "> 0", "max_correspondence": "> 0",
+              "max_iterations": ">= 1", "reregister_fitness": "[0, 1]",
+              "reregister_correspondence": "> 0", "min_fitness": "[0, 1]",
+              "max_step_translation": "> 0", "max_step_rotation_deg": "> 0", "min_points": ">= 1"}
 
     def check(self) -> None:
-        _check_positive("tracker", self, (
-            "max_points", "normal_radius", "max_correspondence", "max_iterations",
-            "reregister_correspondence", "max_step_translation", "max_step_rotation_deg",
-            "min_points"))
-        for name in ("reregister_fitness", "min_fitness"):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise InputError(f"tracker.{name} must be in [0, 1] (a fraction of points), "
-                                 f"got {value}")
+        check_bounds(self, "tracker.")
 
 
 # The encoders' input normalisation divides positions by this (contract.ENCODER_INPUT_SCALE):
