@@ -121,6 +121,10 @@ ROWS = [
     # the tiny library holds clouds only: evaluate needs each object's full scene description
     _row(f"evaluate --run scripted --objects {{root}}/lib --split all {REPORT}",
          "{root}/lib/manifest.json", "unit_inertia"),
+    # bench primitive
+    _row(f"bench primitive {BENCH_REPORT} --decisions 0", "--decisions"),
+    _row(f"bench primitive {BENCH_REPORT} --task {{root}}/bad_type.yaml", "{root}/bad_type.yaml"),
+    _row(f"bench primitive {BENCH_REPORT} --encoder {{root}}/nowhere.pt", "{root}/nowhere.pt"),
     # bench policies
     _row(f"bench policies --policies bogus {BENCH_REPORT}", "--policies"),
     _row(f"bench policies --policies corn,corn {BENCH_REPORT}", "--policies"),

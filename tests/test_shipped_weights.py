@@ -68,7 +68,13 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
         assert cfg.env.cameras.mode == card["cameras"]
         assert (REPO / cfg.teacher / "card.json").is_file()  # distilled from a shipped teacher
         return
-    cfg = load_run_config(folder)
+    if card["policy"] == "primitive":  # a contact-primitive run: its own config, steps counted
+        from corn_drake.rl.primitive_agent import load_primitive_run  # in primitives
+
+        cfg, _, _ = load_primitive_run(folder)
+        assert card["env_steps_unit"] == "primitives"
+    else:
+        cfg = load_run_config(folder)
     assert cfg.policy == card["policy"] and cfg.env.task.name == card["task"]
     assert cfg.env.scene.object.library == library["--out"]
     if cfg.encoder:  # named relative to the folder, so the folder works wherever it lies

@@ -139,7 +139,7 @@ def run(args) -> int:
         ensure_writable(out_dir, "--record")
     kind = "reference" if args.run in REFERENCES else run_kind(
         args.run, or_else=f"a reference ({', '.join(REFERENCES)})")
-    if args.checkpoint and kind != "train":
+    if args.checkpoint and kind not in ("train", "primitive"):
         raise InputError(f"--checkpoint {args.checkpoint} picks one of a teacher run's kept "
                          f"checkpoints; --run {args.run} is not a `corn-drake train` run")
     if args.perception is not None and kind != "distill":
@@ -173,14 +173,34 @@ def run(args) -> int:
             # The student diagram's teacher part takes --task / --set exactly as a teacher
             # run's env does.
             base, policy = TrainConfig(env=student_cfg.teacher), "student"
+        elif kind == "primitive":
+            from corn_drake.rl.primitive_agent import load_primitive_run
+
+            base, agent, env_steps = load_primitive_run(args.run, args.checkpoint)
+            policy = base.policy
+            extra = {"env_steps": env_steps, "env_steps_unit": "primitives",
+                     "checkpoint": agent.checkpoint_file}
         else:
             base, agent, env_steps = load_run_with_step(args.run, args.checkpoint)
             policy = base.policy
             # The file the weights came from: prev.pt when last.pt was unusable.
             extra = {"env_steps": env_steps,
                      "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
-        run_cfg = replace_task(base, args.task) if args.task is not None else base
+        if args.task is not None and kind == "primitive":
+            from corn_drake.config.diagram_files import load_primitive_env_config
+
+            env = load_primitive_env_config(args.task)
+            env.scene.object = base.env.scene.object
+            run_cfg = dataclasses.replace(base, env=env)
+        else:
+            run_cfg = replace_task(base, args.task) if args.task is not None else base
         run_cfg = apply_sets(run_cfg, args.set, only="env")
+        if kind == "primitive" and (args.attention or args.stochastic):
+            # Refused before any env is built, in one line naming the flag.
+            flag = "--attention" if args.attention else "--stochastic"
+            raise InputError(f"{flag}: run {args.run} holds the contact-primitive policy, which "
+                             "chooses greedily and has no cross-attention; its Meshcat view "
+                             "(--record, --keep-open) shows its contact point, push and scores")
         if args.attention and not getattr(agent, "has_attention", False):
             raise InputError(f"--attention: run {args.run} holds a {policy!r} policy, which has "
                              "no cross-attention over patches (only corn, e2e, p2v-lite and rot have one)")

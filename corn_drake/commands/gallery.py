@@ -8,6 +8,11 @@ the episode is the first one `evaluate --seed` runs on that object) is rendered 
 Drake camera at its start, middle and end (viz/gallery.py) and saved side by side as
 OUT/<id>.png, the cloud coloured viridis by the policy's attention (yellow: the patches its
 queries weigh most at that step). OUT/gallery.json lists each episode's outcome and files.
+
+A contact-primitive run (`train --policy primitive`) has no attention: its stills colour the
+cloud by the policy's scores over its contact locations (yellow: where it would rather push)
+and mark the contact point of the primitive under way in magenta (evaluation/stills.py); its
+entries add the episode's `primitives`.
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ from pathlib import Path
 from corn_drake.arguments.value_types import nonnegative_int
 
 NAME = "gallery"
-HELP = "PNG stills (start, middle, end) of a teacher's episodes, coloured by its attention"
+HELP = ("PNG stills (start, middle, end) of a teacher's episodes, coloured by its attention (a "
+        "primitive policy's: by its contact-location scores)")
 
 
 def add_arguments(parser):
-    parser.add_argument("--run", required=True, help="a teacher run or shipped weights folder")
+    parser.add_argument("--run", required=True,
+                        help="a teacher or contact-primitive run, or a shipped weights folder")
     parser.add_argument("--objects", required=True, help="object library folder")
     parser.add_argument("--ids", default="",
                         help="comma-separated object ids (default: the first 3 unseen)")
@@ -50,15 +57,21 @@ def run(args) -> int:
     from corn_drake.storage.atomic_files import ensure_writable, write_json
     from corn_drake.rl.checkpoints import load_run
     from corn_drake.evaluation.stills import episode_stills
+    from corn_drake.run_folders.config_file import run_kind
     from corn_drake.viz.gallery import save_png
 
     out = Path(args.out)
-    cfg, agent = load_run(args.run)
+    if run_kind(args.run) == "primitive":
+        from corn_drake.rl.primitive_agent import load_primitive_run
+
+        cfg, agent, _ = load_primitive_run(args.run)  # painted by its location scores
+    else:
+        cfg, agent = load_run(args.run)
+        if not agent.has_attention:
+            raise InputError(f"--run {args.run} holds a {cfg.policy!r} policy, which has no "
+                             "cross-attention to paint")
     # Evaluate samples each object's cloud with its --seed as the env seed: the same here.
     env_cfg = dataclasses.replace(cfg.env, seed=args.seed)
-    if not agent.has_attention:
-        raise InputError(f"--run {args.run} holds a {cfg.policy!r} policy, which has no "
-                         "cross-attention to paint")
     known = list_objects(args.objects)
     ids = [i for i in args.ids.split(",") if i] or list_objects(args.objects, "unseen")[:3]
     unknown = [i for i in ids if i not in known]
@@ -76,7 +89,8 @@ def run(args) -> int:
                         "points_painted": [s.painted_points for s in stills], **summary})
         print(f"{object_id}: {'success' if summary['success'] else 'no success'} in "
               f"{summary['steps']} steps; {path}")
+    painted = "location scores" if agent.kind == "primitive" else "attention"
     write_json(out / "gallery.json", {"run": str(args.run), "policy": cfg.policy,
                                       "task": cfg.env.task.name, "objects": args.objects,
-                                      "episodes": entries})
+                                      "painted": painted, "episodes": entries})
     return 0

@@ -1,5 +1,5 @@
-"""`corn-drake ship`: copy a trained teacher or student into a self-contained weights folder
-with its card.
+"""`corn-drake ship`: copy a trained teacher, student or contact-primitive policy into a
+self-contained weights folder with its card.
 
     corn-drake ship --run runs/push_corn --report docs/results/eval_push_corn_unseen.json \
         --library-command "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen" \
@@ -12,12 +12,16 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
 - checkpoints/last.pt: the agent's weights only (no optimiser, RNG or history: a shipped folder
   evaluates and teaches; `train` does not resume it). A student (a `distill` run) ships its
   {"kind": "student", "student": ...} weights, which hold its encoder, and its config keeps the
-  teacher it was distilled from as recorded;
+  teacher it was distilled from as recorded. A contact-primitive run (`train --policy
+  primitive`) ships its actor and critic; its replay files (checkpoints/replay_*.npz, hundreds
+  of MB, only for resuming) and its TD3 targets and optimisers stay behind;
 - encoder.pt: the frozen encoder the policy reads (corn, pn, p2v-lite, rot), copied;
 - card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
   `evaluate` report of this very run on the unseen split, kept in docs/results/), the
   `library_command` that rebuilds those objects and the `library_seed`, `evaluate_command`,
-  `train_command` (as given), `source_run`, and the file sizes.
+  `train_command` (as given), `source_run`, and the file sizes. A primitive card adds
+  `env_steps_unit: primitives`: its env_steps counts primitives (one decision each, many policy
+  periods), not the dense policies' policy periods.
 
 The report must be of this run or of OUT (its `run` field: the same weights), on unseen objects
 and without overrides, so a card cannot quote another policy's or another task's number; a
@@ -30,12 +34,14 @@ import shlex
 from pathlib import Path
 
 NAME = "ship"
-HELP = "copy a trained teacher or student run into a self-contained weights folder with a JSON card"
+HELP = ("copy a trained teacher, student or contact-primitive run into a self-contained weights "
+        "folder with a JSON card")
 
 
 def add_arguments(parser):
     parser.add_argument("--run", required=True,
-                        help="the `corn-drake train` (teacher) or `distill` (student) run folder")
+                        help="the `corn-drake train` (teacher, or --policy primitive) or "
+                             "`distill` (student) run folder")
     parser.add_argument("--report", required=True,
                         help="`corn-drake evaluate` report of this run on the unseen split")
     parser.add_argument("--library-command", required=True,
@@ -109,7 +115,7 @@ def run(args) -> int:
     # Before OUT is made: the library must be on this machine to record what it holds (a
     # refused ship leaves nothing behind).
     library_fields = library_card_fields(library["--out"])
-    ship = _ship_student if kind == "distill" else _ship_teacher
+    ship = {"distill": _ship_student, "primitive": _ship_primitive}.get(kind, _ship_teacher)
     shipped = ship(run_dir, out, library["--out"])
     card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
             "success_rate": report["success_rate"],
@@ -128,8 +134,9 @@ def run(args) -> int:
                      for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
     write_json(out / "card.json", card)
     print(f"shipped {args.run} to {out}: {card['policy']} on {card['task']}, "
-          f"{card['env_steps']} steps, unseen success {card['success_rate']:.3f} over "
-          f"{card['episodes']} episodes; {sum(card['bytes'].values()) / 1e6:.1f} MB")
+          f"{card['env_steps']} {card.get('env_steps_unit', 'steps')}, unseen success "
+          f"{card['success_rate']:.3f} over {card['episodes']} episodes; "
+          f"{sum(card['bytes'].values()) / 1e6:.1f} MB")
     return 0
 
 
@@ -167,9 +174,6 @@ def _save_weights(out: Path, state: dict) -> None:
 
 def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a teacher run's config, weights and encoder into `out`; its card fields."""
-    import shutil
-
-    from corn_drake.storage.atomic_files import atomic_path
     from corn_drake.rl.checkpoints import load_run
     from corn_drake.run_folders.config_file import write_run_config
 
@@ -178,9 +182,7 @@ def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
     _make_folder(out)
     encoder_card = None
     if cfg.encoder:
-        with atomic_path(out / "encoder.pt") as tmp:
-            shutil.copyfile(cfg.encoder, tmp)
-        cfg.encoder = "encoder.pt"
+        _copy_encoder(cfg, out)
         # Its pretraining record (contact F1 or pretext skill), as the encoder file holds it.
         encoder_card = {"file": "encoder.pt", "kind": agent.encoder.kind,
                         "pretraining": getattr(agent.encoder, "pretraining", None)}
@@ -193,6 +195,43 @@ def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
     if cfg.init_from:  # a curriculum run: env_steps counts only its own, not its source's
         card["init_from"] = cfg.init_from
     return card
+
+
+def _copy_encoder(cfg, out: Path) -> None:
+    """OUT/encoder.pt, a copy of the encoder file `cfg` names (resolved as the run reads it);
+    `cfg.encoder` then names it relative to OUT."""
+    import shutil
+
+    from corn_drake.storage.atomic_files import atomic_path
+
+    with atomic_path(out / "encoder.pt") as tmp:
+        shutil.copyfile(cfg.encoder, tmp)
+    cfg.encoder = "encoder.pt"
+
+
+def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
+    """Writes a contact-primitive run's config, actor and critic and encoder into `out`; its
+    card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
+    the replay files and the learner's targets and optimisers are for resuming a run."""
+    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.rl.primitive_agent import load_primitive_run
+    from corn_drake.run_folders.config_file import write_run_config
+
+    cfg, agent, _ = load_primitive_run(run_dir)  # the run must load as evaluate would load it
+    state = _weights(run_dir, "agent")
+    _make_folder(out)
+    # A run's config names its own copy, encoder.pt, relative to the run folder.
+    cfg.encoder = run_encoder_path(run_dir, cfg.encoder)
+    _copy_encoder(cfg, out)
+    if cfg.env.scene.object.kind == "library":
+        cfg.env.scene.object.library = library
+    write_run_config(cfg, out)
+    _save_weights(out, {"agent": state["agent"], "global_step": state["global_step"]})
+    return {"policy": cfg.policy, "task": cfg.env.task.name,
+            "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
+            "locations": cfg.locations,
+            "encoder": {"file": "encoder.pt", "kind": agent.encoder.kind,
+                        "pretraining": getattr(agent.encoder, "pretraining", None)}}
 
 
 def _ship_student(run_dir: Path, out: Path, library: str) -> dict:

@@ -20,7 +20,7 @@ from corn_drake.arguments.run_flags import (RESUME_MAY_CHANGE, RUN_SHORTCUTS, ad
                                             flag_of_field)
 from corn_drake.arguments.torch_threads import add_torch_threads_argument
 from corn_drake.arguments.value_types import finite_float, positive_int
-from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS
+from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, TRAIN_POLICIES
 
 NAME = "train"
 HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
@@ -54,8 +54,10 @@ def add_arguments(parser):
                              "task.episode_steps=50 (repeatable; KEY a TrainConfig field, the "
                              "env's sections scene/randomization/controller/task without env.; "
                              "default: none)")
-    parser.add_argument("--policy", choices=POLICY_KINDS, default=None,
+    parser.add_argument("--policy", choices=TRAIN_POLICIES, default=None,
                         help="the teacher's policy (the variants: corn_drake/rl/policy_kinds.py; "
+                             "primitive: the contact-primitive policy, trained off-policy, "
+                             "corn_drake/commands/train_primitive.py; "
                              f"default: {DEFAULT_POLICY} for a new run, the method the project "
                              "is named for, which needs --encoder; a resumed run keeps its own, "
                              "an --init-from run takes its source's)")
@@ -100,6 +102,10 @@ def requested_config(args, recorded):
 
 
 def run(args) -> int:
+    from corn_drake.commands import train_primitive
+
+    if train_primitive.wants_primitive(args):
+        return train_primitive.run(args)
     from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.pretrained_encoders import load_encoder

@@ -53,6 +53,15 @@ def load_teacher_config(task: str | Path | None = None) -> TeacherDiagramConfig:
     return load_config(TeacherDiagramConfig, path, defaults=cfg)
 
 
+PRIMITIVE_LAYER = DIAGRAMS_DIR / "primitive_rollout.yaml"
+
+
+def load_primitive_env_config(task: str | Path | None = None) -> TeacherDiagramConfig:
+    """The contact-primitive policy's env config: load_teacher_config(task) with the primitive
+    layer (diagrams/primitive_rollout.yaml) on top."""
+    return load_config(TeacherDiagramConfig, PRIMITIVE_LAYER, defaults=load_teacher_config(task))
+
+
 def replace_task(cfg: TrainConfig, task: str | Path) -> TrainConfig:
     """`cfg` with its env rebuilt from the base and `task`'s overlay. The object(s) stay cfg's:
     they are chosen apart from the task (`train --objects`)."""

@@ -96,6 +96,18 @@ def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int |
     from corn_drake.rl.env import TeacherEnv
     from corn_drake.rl.student_env import StudentEnv
 
+    if getattr(policy, "kind", None) == "primitive":
+        # The contact-primitive policy: its executor and policy systems in the teacher's
+        # diagram (builders/primitive.py), with the executor settings it was trained with.
+        from corn_drake.rl.primitive_env import PrimitiveEnv
+
+        if stochastic or attention:
+            raise InputError("the primitive policy acts greedily and has no cross-attention: "
+                             "--stochastic and --attention do not apply (its Meshcat view "
+                             "shows its contact point, push and scores)")
+        if seed is not None:
+            cfg = dataclasses.replace(cfg, seed=seed)
+        return PrimitiveEnv(cfg, policy.primitive_config, spec, meshcat, agent=policy)
     if isinstance(cfg, StudentDiagramConfig):
         if seed is not None:
             cfg = dataclasses.replace(cfg, teacher=dataclasses.replace(cfg.teacher, seed=seed))

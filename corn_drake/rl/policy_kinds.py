@@ -23,3 +23,9 @@ FROZEN_ENCODER_POLICIES = ("corn", "pn", "p2v-lite", "rot")
 
 # Policies that cross-attend over the patch encoder's tokens (the rest use an MLP head).
 TOKEN_POLICIES = ("corn", "e2e", "p2v-lite", "rot")
+
+# The contact-primitive policy (rl/primitive_agent.py): the frozen CORN encoder's patch tokens
+# choose where to push; trained off-policy by `train --policy primitive` (rl/primitive_trainer.py),
+# not a PPO variant, so it is not in POLICY_KINDS (the dense comparison's list).
+PRIMITIVE_POLICY = "primitive"
+TRAIN_POLICIES = (*POLICY_KINDS, PRIMITIVE_POLICY)

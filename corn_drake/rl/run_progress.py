@@ -11,11 +11,13 @@ from corn_drake.rl.vec_env import EnvBatch, EnvFactory
 
 
 def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
-                   ray_address: str = "", start_episode: int = 0):
+                   ray_address: str = "", start_episode: int = 0, primitive=None):
     """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
-    Ray actors. `env_config` is a teacher or a student diagram config (EnvFactory)."""
+    Ray actors. `env_config` is a teacher or a student diagram config (EnvFactory); with
+    `primitive` (a PrimitiveConfig), contact-primitive envs of the teacher config."""
     n_envs = max(workers, 1) * envs_per_worker
-    factory = EnvFactory(env_config, seed, num_envs=n_envs, start_episode=start_episode)
+    factory = EnvFactory(env_config, seed, num_envs=n_envs, start_episode=start_episode,
+                         primitive=primitive)
     if workers > 0:
         from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
 

@@ -85,6 +85,9 @@ class EnvFactory:
     # Episode number every env starts at: a resumed run continues the object rounds and the
     # episode seeds from about where it stopped instead of replaying its first episodes.
     start_episode: int = 0
+    # A PrimitiveConfig makes PrimitiveEnvs (one step = one contact primitive,
+    # rl/primitive_env.py) of the teacher config instead of TeacherEnvs.
+    primitive: Any = None
 
     @property
     def teacher_config(self) -> TeacherDiagramConfig:
@@ -125,6 +128,10 @@ class EnvFactory:
             teacher_cfg.seed = self.seed
             teacher_cfg.scene.object.library_objects = "one"
             teacher_cfg.scene.object.object_id = object_id
+        if self.primitive is not None:
+            from corn_drake.rl.primitive_env import PrimitiveEnv
+
+            return PrimitiveEnv(cfg, self.primitive)
         return StudentEnv(cfg) if student else TeacherEnv(cfg)
 
 

@@ -38,7 +38,8 @@ def write_run_config(cfg: TrainConfig, run_dir: str | Path) -> Path:
 
 
 def run_kind(run: str, or_else: str = "") -> str:
-    """"train" or "distill": which command wrote the run folder `run`, told by the top-level
+    """"train", "primitive" (train --policy primitive) or "distill": which command wrote the
+    run folder `run`, told by the top-level
     keys of its config.yaml; a missing config or one of neither kind is an error naming --run
     (and `or_else`, what else the command would have taken)."""
     import yaml
@@ -54,6 +55,8 @@ def run_kind(run: str, or_else: str = "") -> str:
         raise InputError(f"--run {run}: {path} is not a YAML run config "
                          f"({' '.join(str(e).split())[:200]})") from None
     keys = set(data) if isinstance(data, dict) else set()
+    if "primitive" in keys:  # PrimitiveTrainConfig's own section (train --policy primitive)
+        return "primitive"
     # The top-level fields only one of the two configs has (both have env, seed, ...).
     train_fields, distill_fields = set(field_types(TrainConfig)), set(field_types(DistillConfig))
     train_only, distill_only = train_fields - distill_fields, distill_fields - train_fields

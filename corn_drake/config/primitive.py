@@ -1,0 +1,114 @@
+"""The contact-primitive policy's configs: how one primitive is executed (PrimitiveConfig, the
+executor's and the primitive env's), and what a primitive training run records
+(PrimitiveTrainConfig, `corn-drake train --policy primitive`, RUN/config.yaml).
+
+A primitive: a contact location on the object's cloud (a point with its outward surface normal)
+and a push motion. The executor (systems/primitive_executor.py) moves the tool up to `clearance`
+above the object's top, across to above the pre-contact point (`pre_contact_distance` off the
+surface along the normal), down to it, pushes by the motion over `push_steps` policy periods and
+lifts `retreat_height`. Distances are metres; step counts are policy periods (0.1 s).
+
+No `from __future__ import annotations`: yaml_load_typed needs real types on the fields.
+"""
+
+import dataclasses as dc
+
+from corn_drake.config.bounds import check_bounds
+from corn_drake.config.choices import PRIMITIVE_LOCATIONS
+from corn_drake.config.teacher import TeacherDiagramConfig
+from corn_drake.config.training import RunSettings
+from corn_drake.errors import InputError
+
+
+@dc.dataclass
+class PrimitiveConfig:
+    # Range checks (config/bounds.py): what check_bounds refuses.
+    BOUNDS = {"pre_contact_distance": "> 0", "clearance": "> 0", "min_tool_height": ">= 0",
+              "push_distance": "> 0", "push_steps": ">= 1", "retreat_height": ">= 0",
+              "retreat_steps": ">= 1", "reach_tolerance": "> 0", "turn_tolerance": "> 0", "approach_steps": ">= 1",
+              "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
+              "progress_reward": ">= 0"}
+    # The tool point stops this far off the surface along the normal before the push. The
+    # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
+    pre_contact_distance: float = 0.04
+    # The tool travels this far above the object's highest bounding-box corner, so the fingers
+    # (their tips 9 mm below the tool point) pass over the object, never through it.
+    clearance: float = 0.05
+    # The tool point never aims lower than this above the table top (the fingertips are 9 mm
+    # below it): a contact point near the table is pushed from just above the table.
+    min_tool_height: float = 0.015
+    # The push motion at |a| = 1 per axis (m): the policy's motion in [-1, 1]^3 times this.
+    push_distance: float = 0.1
+    # Policy periods the push lasts: the tool's target moves from the pre-contact point to the
+    # push's end in this many equal steps (each within the controller's max_position_delta).
+    push_steps: int = 4
+    retreat_height: float = 0.05
+    retreat_steps: int = 2
+    # The pre-contact pose counts as reached when the tool point is within this of it.
+    reach_tolerance: float = 0.015
+    # The descent starts once the hand's turn (fingers down, narrow side to the surface) is
+    # within this many radians of its target.
+    turn_tolerance: float = 0.15
+    # Policy periods the approach (up, across, down) may take before the primitive is given up
+    # as unreached (an obstacle, an unreachable point): then the tool only retreats.
+    approach_steps: int = 20
+    # An episode ends after this many primitives (HACMan's 10), or at the task's episode_steps.
+    max_primitives: int = 10
+    # The executor's joint stiffness and damping ratio, normalised like the dense action's kp and
+    # rho ([-1, 1] over controller.kp_range / rho_range): stiff enough to track 6 cm per step.
+    stiffness: float = 0.5
+    damping: float = 0.0
+    # Reward of one primitive: this times how much it closed the mean distance (m) between the
+    # object's bounding-box keypoints and the goal's (the paper's keypoints, whose potential is
+    # nearly linear in that distance at these ranges), plus the task's success_reward on
+    # success. 10 per metre makes a 5 cm step toward the goal worth 0.5, half a success; the
+    # paper's own scale (k1 0.302 x 1.2 per metre, 0.02 for 5 cm) is drowned by the success
+    # bonus over a 10-primitive episode.
+    progress_reward: float = 10.0
+
+
+@dc.dataclass
+class PrimitiveTrainConfig(RunSettings):
+    """A primitive training run (rl/primitive_trainer.py). total_steps counts primitives (one
+    env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
+    holds `learning_starts` transitions. TD3 numbers: rl/td3.py's TD3Settings."""
+    BOUNDS = {"replay_capacity": ">= 1", "learning_starts": ">= 1", "updates_per_step": ">= 0",
+              "batch_size": ">= 1", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
+              "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
+              "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
+              "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1"}
+    policy: str = "primitive"
+    # Candidate contact locations: "patch", the encoder's 16 patch centres (each a cloud point)
+    # with their tokens (config/choices.py PRIMITIVE_LOCATIONS says why not every point yet).
+    locations: str = "patch"
+    replay_capacity: int = 200_000
+    learning_starts: int = 256
+    updates_per_step: int = 1
+    batch_size: int = 64
+    gamma: float = 0.99
+    tau: float = 0.005
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    policy_delay: int = 2
+    target_noise: float = 0.2
+    target_noise_clip: float = 0.5
+    # Exploration: locations sampled from softmax(score / temperature), motions + N(0, noise).
+    temperature: float = 0.1
+    motion_noise: float = 0.3
+    # The first primitives choose uniformly random locations and motions (fills the replay).
+    random_steps: int = 512
+    hidden: int = 256
+    log_every: int = 50  # primitives per metrics row / TensorBoard point
+    checkpoint_every: int = 500  # primitives between checkpoints (model, optimisers, replay)
+    primitive: PrimitiveConfig = dc.field(default_factory=PrimitiveConfig)
+    env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
+
+    def check(self) -> None:
+        """InputError naming the first field a run cannot start with (the env's too)."""
+        check_bounds(self)  # nested configs too (primitive, env)
+        if self.locations not in PRIMITIVE_LOCATIONS:
+            raise InputError(f"locations must be one of {', '.join(PRIMITIVE_LOCATIONS)}, got "
+                             f"{self.locations!r}")
+        if self.policy != "primitive":
+            raise InputError(f"a primitive run's policy must be 'primitive', got {self.policy!r}")
+        self.env.check()

@@ -1,0 +1,65 @@
+"""Per-location features of the contact-primitive policy, from the frozen CORN encoder's tokens.
+
+A location is where the policy may touch the object: one of the encoder's patch centres
+("patch": 16 per cloud, each a cloud point) or every cloud point ("point": 512, each carrying
+the token of its nearest patch centre). For each location the policy sees
+  tokens (D)  the patch token (the contact-pretrained encoder's summary of that part of the
+              object, having attended to the hand token and every other patch);
+  local (9)   the location relative to the object's origin, its goal flow (where the goal pose
+              puts that surface point, minus where it is: HACMan's per-point goal flow), and
+              its outward normal;
+and per state
+  global (146) the goal (relative position, 6D rotation), the hand (position relative to the
+              object, 6D rotation) and the hand token.
+Positions and flows are in decimetres (x 10) so they sit near unit scale beside the normals.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from corn_drake.nn.geometry import matrix_from_rot6d
+from corn_drake.nn.patchify import gather_points, patch_indices
+
+LOCAL_DIM = 9
+POSITION_SCALE = 10.0  # metres -> decimetres
+LOCATION_KINDS = ("patch", "point")
+
+
+def global_dim(token_dim: int) -> int:
+    return 3 + 6 + 3 + 6 + token_dim
+
+
+def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "patch"
+                      ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """(features {"tokens" (B, L, D), "local" (B, L, 9), "global" (B, 146)}, candidates (B, L):
+    each location's index into the cloud) for a batch of primitive-env observations (torch,
+    batched). `encoder`: a NormalizedEncoder of a patch kind."""
+    if locations not in LOCATION_KINDS:
+        raise ValueError(f"locations must be one of {LOCATION_KINDS}, got {locations!r}")
+    cloud, hand = obs["cloud"], obs["hand_state"]
+    network = encoder.network
+    center_idx, knn_idx = patch_indices(cloud, network.num_patches, network.patch_size)
+    tokens = encoder(cloud, hand, (center_idx, knn_idx))
+    hand_token, patch_tokens = tokens[:, 0], tokens[:, 1:]
+    p_obj, goal, normals = obs["object_position"], obs["goal"], obs["normals"]
+    if locations == "patch":
+        candidates = center_idx
+        points = gather_points(cloud, candidates)
+        loc_normals = gather_points(normals, candidates)
+        loc_tokens = patch_tokens
+    else:
+        B, N = cloud.shape[:2]
+        candidates = torch.arange(N, device=cloud.device).expand(B, N)
+        points, loc_normals = cloud, normals
+        centers = gather_points(cloud, center_idx)
+        nearest = torch.cdist(cloud, centers).argmin(-1)  # (B, N)
+        loc_tokens = torch.gather(patch_tokens, 1,
+                                  nearest.unsqueeze(-1).expand(-1, -1, patch_tokens.shape[-1]))
+    R_rel = matrix_from_rot6d(goal[:, 3:9])  # goal rotation relative to the object's
+    rel = points - p_obj.unsqueeze(1)
+    flow = rel @ R_rel.transpose(1, 2) + goal[:, None, :3] - rel
+    local = torch.cat([rel * POSITION_SCALE, flow * POSITION_SCALE, loc_normals], -1)
+    context = torch.cat([goal[:, :3] * POSITION_SCALE, goal[:, 3:9],
+                         (hand[:, :3] - p_obj) * POSITION_SCALE, hand[:, 3:9], hand_token], -1)
+    return {"tokens": loc_tokens, "local": local, "global": context}, candidates

@@ -1,0 +1,128 @@
+"""PrimitiveAgent: the contact-primitive policy — the frozen CORN encoder's per-location features,
+a per-location actor (the push motion at each location) and a twin per-location critic.
+
+The policy's choice for an observation: the location with the highest score, the score being
+the critic's Q1 at that location with the actor's motion there (HACMan's per-point critic), and
+that motion. `choose` returns the chosen location's index into the cloud (the env action's
+`point`), the motion, the location's own index and the scores of every location (for display).
+
+Checkpoint (`agent` entry of a primitive run's checkpoint, state_dict()): the actor's and the
+critic's weights and the network shape; the encoder is the run's encoder.pt, as for the dense
+policies (rl/checkpoints.run_encoder_path).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from corn_drake.nn.primitive_features import LOCAL_DIM, global_dim, location_features
+from corn_drake.nn.primitive_heads import PrimitiveActor, PrimitiveCritic
+
+AGENT_KIND = "primitive"
+OBS_KEYS_USED = ("cloud", "hand_state", "goal", "normals", "object_position")
+
+
+def obs_to_torch(obs: dict[str, np.ndarray]) -> tuple[bool, dict[str, torch.Tensor]]:
+    """(whether `obs` was one unbatched observation, its keys the features use as float32
+    tensors with a batch axis)."""
+    single = np.asarray(obs["cloud"]).ndim == 2
+    out = {}
+    for key in OBS_KEYS_USED:
+        value = torch.as_tensor(np.asarray(obs[key]), dtype=torch.float32)
+        out[key] = value.unsqueeze(0) if single else value
+    return single, out
+
+
+class PrimitiveAgent(nn.Module):
+    kind = AGENT_KIND
+    has_attention = False  # the dense policies' patch attention; this one shows its scores
+
+    def __init__(self, encoder, locations: str = "patch", hidden: int = 256):
+        super().__init__()
+        if getattr(encoder, "kind", None) not in ("corn", "p2v-lite", "rot"):
+            raise ValueError(f"the primitive policy needs a patch encoder (corn), got "
+                             f"{getattr(encoder, 'kind', type(encoder).__name__)!r}")
+        self.encoder = encoder
+        for p in self.encoder.parameters():
+            p.requires_grad_(False)
+        self.locations, self.hidden = locations, hidden
+        dim = encoder.network.dim
+        self.actor = PrimitiveActor(dim, LOCAL_DIM, global_dim(dim), hidden)
+        self.critic = PrimitiveCritic(dim, LOCAL_DIM, global_dim(dim), hidden)
+        self.checkpoint_file = None  # the file the weights came from (evaluate's report)
+
+    @torch.no_grad()
+    def features(self, obs: dict[str, np.ndarray]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """(features, candidates) of a batch of observations (numpy, batched)."""
+        _, batch = obs_to_torch(obs)
+        self.encoder.eval()
+        return location_features(self.encoder, batch, self.locations)
+
+    @torch.no_grad()
+    def scores_and_motions(self, features: dict[str, torch.Tensor]
+                           ) -> tuple[torch.Tensor, torch.Tensor]:
+        motions = self.actor(features)
+        q1, _ = self.critic(features, motions)
+        return q1, motions
+
+    def choose(self, obs: dict[str, np.ndarray]) -> dict:
+        """The greedy choice for one observation: {"point" (cloud index), "motion" (3,),
+        "location" (index among the candidates), "scores" (L,), "candidates" (L,)}."""
+        single, _ = obs_to_torch(obs)
+        if not single:
+            raise ValueError("PrimitiveAgent.choose takes one observation (cloud (N, 3))")
+        features, candidates = self.features(obs)
+        scores, motions = self.scores_and_motions(features)
+        location = int(torch.argmax(scores[0]))
+        return {"point": int(candidates[0, location]),
+                "motion": motions[0, location].numpy().astype(np.float64),
+                "location": location, "scores": scores[0].numpy().astype(np.float64),
+                "candidates": candidates[0].numpy()}
+
+    def network_state(self) -> dict:
+        return {"locations": self.locations, "hidden": self.hidden,
+                "actor": self.actor.state_dict(), "critic": self.critic.state_dict()}
+
+    def load_network_state(self, state: dict, source) -> None:
+        from corn_drake.errors import InputError
+
+        if state.get("locations") != self.locations or state.get("hidden") != self.hidden:
+            raise InputError(f"{source}: a primitive agent with locations "
+                             f"{state.get('locations')!r}, hidden {state.get('hidden')}, not "
+                             f"{self.locations!r}, {self.hidden}")
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+
+
+def load_primitive_run(run_dir, checkpoint: str = ""):
+    """(PrimitiveTrainConfig, PrimitiveAgent in eval mode carrying `primitive_config`, the
+    primitives it was trained for) of a `train --policy primitive` run folder, from its
+    config.yaml, encoder.pt and checkpoints/last.pt (prev.pt if need be) or, given
+    `checkpoint`, that file of its checkpoints folder."""
+    from pathlib import Path
+
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.primitive import PrimitiveTrainConfig
+    from corn_drake.errors import MissingInputError
+    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.rl.pretrained_encoders import load_encoder
+    from corn_drake.run_folders.config_file import run_config_path
+    from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
+
+    run_dir = Path(run_dir)
+    cfg = load_config(PrimitiveTrainConfig, run_config_path(run_dir))
+    ckpt = run_dir / "checkpoints" / (checkpoint or "last.pt")
+    loaded = load_checkpoint_and_file(ckpt, required=("agent", "global_step"),
+                                      fallback=not checkpoint)
+    if loaded is None:
+        raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
+    state, used = loaded
+    encoder = load_encoder("corn", run_encoder_path(run_dir, cfg.encoder), cfg.allow_weak_encoder)
+    agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden)
+    agent.load_network_state(state["agent"], used)
+    agent.eval()
+    agent.primitive_config = cfg.primitive
+    agent.checkpoint_file = used.name
+    return cfg, agent, int(state["global_step"])

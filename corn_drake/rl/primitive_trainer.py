@@ -1,0 +1,207 @@
+"""Off-policy training of the contact-primitive policy (`corn-drake train --policy primitive`).
+
+Each loop: every env of the batch (in-process, or on Ray workers with `--workers`) runs one
+primitive chosen by the current policy (softmax over per-location scores + motion noise; the
+first `random_steps` primitives uniformly random), the transitions go into the replay buffer as
+per-location features (the frozen encoder runs once per observation, at collection), and the
+learner takes `updates_per_step` TD3 steps per primitive collected (rl/td3.py).
+
+Run folder: config.yaml, encoder.pt (the frozen encoder, copied in so the folder is
+self-contained), checkpoints/last.pt (+ prev.pt) and checkpoints/replay_<step>.npz, tb/
+(TensorBoard), metrics.json (history rows every `log_every` primitives), plots/. A killed run
+resumes from last.pt at the step it was saved: networks, targets, optimisers, replay, counters
+and random streams come back; the envs start fresh episodes (the episode cut by the kill is not
+replayed), continuing the rounds over the train objects.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from corn_drake.config.primitive import PrimitiveTrainConfig
+from corn_drake.contract import RECENT_EPISODES
+from corn_drake.errors import InputError
+from corn_drake.rl.primitive_agent import PrimitiveAgent
+from corn_drake.rl.replay import ReplayBuffer
+from corn_drake.rl.run_progress import make_env_batch, recent_mean, to_cpu
+from corn_drake.rl.td3 import TD3Learner, TD3Settings
+from corn_drake.storage.atomic_files import write_json
+from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
+
+CHECKPOINT_KEYS = ("policy", "agent", "learner", "global_step", "episodes", "history",
+                   "recent_episodes", "np_rng", "torch_rng", "replay_file")
+
+
+def td3_settings(cfg: PrimitiveTrainConfig) -> TD3Settings:
+    return TD3Settings(gamma=cfg.gamma, tau=cfg.tau, actor_lr=cfg.actor_lr,
+                       critic_lr=cfg.critic_lr, policy_delay=cfg.policy_delay,
+                       target_noise=cfg.target_noise, target_noise_clip=cfg.target_noise_clip,
+                       batch_size=cfg.batch_size)
+
+
+def _numpy(features: dict[str, torch.Tensor], rows) -> dict[str, np.ndarray]:
+    return {k: v[rows].cpu().numpy() for k, v in features.items()}
+
+
+class PrimitiveTrainer:
+    def __init__(self, cfg: PrimitiveTrainConfig, out: str | Path, encoder):
+        self.cfg, self.out = cfg, Path(out)
+        torch.manual_seed(cfg.seed)
+        self.np_rng = np.random.default_rng(cfg.seed)
+        self.agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden)
+        self.learner = TD3Learner(self.agent.actor, self.agent.critic, td3_settings(cfg),
+                                  seed=cfg.seed)
+        self.replay = ReplayBuffer(cfg.replay_capacity)
+        self.global_step, self.episodes, self.history = 0, 0, []
+        self.recent_episodes: list[dict] = []
+        self.checkpoint_dir = self.out / "checkpoints"
+        self._load()
+        n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
+        self.envs = make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
+                                   cfg.ray_address, self.episodes // n_envs, cfg.primitive)
+
+    # --- checkpoints -------------------------------------------------------------------------
+    def _save(self) -> None:
+        """Replay first (its own file, named by step), then last.pt naming it: last.pt always
+        names a complete replay file. Replay files of older checkpoints than prev.pt's go."""
+        self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
+        replay_file = f"replay_{self.global_step:09d}.npz"
+        self.replay.save(self.checkpoint_dir / replay_file)
+        previous = load_checkpoint(self.checkpoint_dir / "last.pt", fallback=False)
+        state = {"policy": self.cfg.policy, "agent": to_cpu(self.agent.network_state()),
+                 "learner": to_cpu(self.learner.state_dict()), "global_step": self.global_step,
+                 "episodes": self.episodes, "history": self.history,
+                 "recent_episodes": self.recent_episodes, "np_rng": self.np_rng.bit_generator.state,
+                 "torch_rng": torch.get_rng_state(), "replay_file": replay_file}
+        save_checkpoint(self.checkpoint_dir / "last.pt", state)
+        keep = {replay_file, (previous or {}).get("replay_file")}
+        for path in self.checkpoint_dir.glob("replay_*.npz"):
+            if path.name not in keep:
+                path.unlink(missing_ok=True)
+
+    def _load(self) -> None:
+        state = load_checkpoint(self.checkpoint_dir / "last.pt", required=CHECKPOINT_KEYS)
+        if state is None:
+            return
+        if state["policy"] != self.cfg.policy:
+            raise InputError(f"{self.checkpoint_dir / 'last.pt'} holds a {state['policy']!r} "
+                             f"policy, not {self.cfg.policy!r}")
+        self.agent.load_network_state(state["agent"], self.checkpoint_dir / "last.pt")
+        self.learner.load_state_dict(state["learner"])
+        self.replay = ReplayBuffer.load(self.checkpoint_dir / state["replay_file"],
+                                        self.cfg.replay_capacity)
+        self.global_step, self.episodes = state["global_step"], state["episodes"]
+        self.history, self.recent_episodes = state["history"], state["recent_episodes"]
+        self.np_rng.bit_generator.state = state["np_rng"]
+        torch.set_rng_state(state["torch_rng"])
+
+    # --- one round of primitives -------------------------------------------------------------
+    def _choose(self, features, candidates) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.cfg
+        n, num_locations = candidates.shape
+        if self.global_step < cfg.random_steps:
+            locations = self.np_rng.integers(0, num_locations, n)
+            motions = self.np_rng.uniform(-1.0, 1.0, (n, 3)).astype(np.float32)
+        else:
+            locations, motions, _ = self.learner.select(
+                features, greedy=False, temperature=cfg.temperature,
+                motion_noise=cfg.motion_noise, rng=self.np_rng)
+        return locations, motions
+
+    def _round(self, obs, features, candidates):
+        """One primitive in every env: transitions into the replay; returns the next
+        (obs, features, candidates) and the episodes that ended."""
+        locations, motions = self._choose(features, candidates)
+        points = candidates.numpy()[np.arange(len(locations)), np.asarray(locations)]
+        actions = [{"point": int(p), "motion": m} for p, m in zip(points, motions)]
+        step = self.envs.step(actions)
+        next_features, next_candidates = self.agent.features(step.obs)
+        target = {k: v.clone() for k, v in next_features.items()}
+        if step.final_obs:  # an ended episode's transition leads to its last observation
+            ended = sorted(step.final_obs)
+            final, _ = self.agent.features({k: np.stack([step.final_obs[i][k] for i in ended])
+                                            for k in step.final_obs[ended[0]]})
+            for key in target:
+                target[key][ended] = final[key]
+        rows = np.arange(len(actions))
+        self.replay.add_batch(_numpy(features, rows), np.asarray(locations), motions,
+                              step.rewards, step.terminated, _numpy(target, rows))
+        return step, next_features, next_candidates
+
+    def train(self, progress: bool = True) -> dict:
+        from torch.utils.tensorboard import SummaryWriter
+        from tqdm import tqdm
+
+        from corn_drake.viz.learning_curves import plot_learning_curves
+
+        cfg = self.cfg
+        self.out.mkdir(parents=True, exist_ok=True)
+        writer = SummaryWriter(str(self.out / "tb"))
+        obs = self.envs.reset()
+        features, candidates = self.agent.features(obs)
+        bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
+                   desc="train primitive", unit="primitive")
+        losses: list[dict] = []
+        window = {"t0": time.perf_counter(), "primitives": 0}
+        last_log = self.global_step // cfg.log_every
+        last_checkpoint = self.global_step // cfg.checkpoint_every
+        n = len(self.envs)
+        while self.global_step < cfg.total_steps:
+            step, features, candidates = self._round(obs, features, candidates)
+            obs = step.obs
+            self.global_step += n
+            window["primitives"] += n
+            for stats in step.episode_stats:
+                self.episodes += 1
+                self.recent_episodes = (self.recent_episodes + [stats])[-RECENT_EPISODES:]
+            if len(self.replay) >= cfg.learning_starts:
+                for _ in range(cfg.updates_per_step * n):
+                    losses.append(self.learner.update(self.replay.sample(cfg.batch_size,
+                                                                         self.np_rng)))
+            bar.update(n)
+            if self.global_step // cfg.log_every > last_log:
+                last_log = self.global_step // cfg.log_every
+                self._log(writer, losses, window, bar, progress)
+                losses = []
+                window = {"t0": time.perf_counter(), "primitives": 0}
+            if self.global_step // cfg.checkpoint_every > last_checkpoint:
+                last_checkpoint = self.global_step // cfg.checkpoint_every
+                self._save()
+        self._save()
+        writer.close()
+        bar.close()
+        metrics = {"policy": cfg.policy, "global_step": self.global_step,
+                   "episodes": self.episodes, "final": self.history[-1] if self.history else {},
+                   "history": self.history}
+        write_json(self.out / "metrics.json", metrics)
+        if self.history:
+            plot_learning_curves({cfg.policy: self.history},
+                                 self.out / "plots" / "learning_curve.png")
+        return metrics
+
+    def _log(self, writer, losses, window, bar, progress) -> None:
+        recent = self.recent_episodes
+        elapsed = time.perf_counter() - window["t0"]
+        row = {"step": self.global_step, "episodes": self.episodes,
+               "success_rate": recent_mean(recent, "success"),
+               "return": recent_mean(recent, "return"),
+               "episode_length": recent_mean(recent, "length"),
+               "primitives_per_s": window["primitives"] / max(elapsed, 1e-9),
+               "replay": len(self.replay), "updates": self.learner.updates}
+        for key in ("critic_loss", "actor_loss", "q_mean"):
+            values = [x[key] for x in losses if np.isfinite(x.get(key, np.nan))]
+            row[key] = float(np.mean(values)) if values else None
+        self.history.append(row)
+        for key, value in row.items():
+            if key != "step" and value is not None:
+                writer.add_scalar(f"train/{key}", value, self.global_step)
+        writer.flush()
+        bar.set_postfix(success=f"{row['success_rate']:.2f}", ret=f"{row['return']:.2f}")
+        if not progress:
+            print(f"primitive {self.global_step}: success {row['success_rate']:.2f} return "
+                  f"{row['return']:.3f} critic {row['critic_loss']} "
+                  f"{row['primitives_per_s']:.1f} primitives/s", flush=True)

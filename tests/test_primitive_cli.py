@@ -1,0 +1,219 @@
+"""The contact-primitive policy through the command line: `train --policy primitive` refuses what
+does not apply to it, a killed run resumes where its checkpoint left it, `ship` makes a weights
+folder `evaluate` and `gallery` read, and `bench primitive` writes its report.
+
+Runs are tiny (the task's box, 2 envs, a few dozen primitives) and in this process; the policy
+is barely trained, so the tests check what the commands write and that the shipped folder
+behaves as the run, not how well it pushes.
+"""
+
+import collections
+import json
+
+import pytest
+
+from corn_drake.cli import main
+from corn_drake.package_data import data_dir
+from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+from corn_drake.rl.replay import ReplayBuffer
+from corn_drake.storage.checkpoint_files import load_checkpoint
+
+WEIGHTS = data_dir("models") / "weights"
+ENCODER = str(WEIGHTS / "push_corn" / "encoder.pt")
+# The smallest run that learns at all: 8 random primitives fill the replay, then TD3 updates.
+TINY = ["--task", "push", "--encoder", ENCODER, "--envs-per-worker", "2", "--no-progress",
+        "--set", "random_steps=8", "--set", "learning_starts=8", "--set", "log_every=8"]
+
+
+def _train(out, steps: int, *extra: str) -> int:
+    return main(["train", "--policy", "primitive", *TINY, "--steps", str(steps), "--out",
+                 str(out), *extra])
+
+
+def _one_error_line(capsys, *needles: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    return err
+
+
+def _checkpoint(run) -> dict:
+    return load_checkpoint(run / "checkpoints" / "last.pt", fallback=False)
+
+
+# --- what train refuses ------------------------------------------------------------------------
+@pytest.mark.parametrize("flag, value", [("--rollout-steps", "8"), ("--minibatches", "2"),
+                                         ("--init-log-std", "-0.5")])
+def test_train_primitive_refuses_a_ppo_flag_naming_it(tmp_path, capsys, flag, value):
+    out = tmp_path / "run"
+    assert _train(out, 8, flag, value) == 2
+    _one_error_line(capsys, flag, "PPO")
+    assert not (out / "config.yaml").exists()
+
+
+def test_train_primitive_refuses_to_start_without_an_encoder(tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = [a for a in TINY if a not in ("--encoder", ENCODER)]
+    assert main(["train", "--policy", "primitive", *argv, "--steps", "8", "--out", str(out)]) == 2
+    _one_error_line(capsys, "--encoder")
+    assert not (out / "config.yaml").exists()
+
+
+# --- a killed run resumes ----------------------------------------------------------------------
+def test_a_killed_primitive_run_resumes_at_its_checkpoint(tmp_path, capsys, monkeypatch):
+    """A run of 24 primitives killed (Ctrl-C) at primitive 20 with checkpoints every 8: last.pt
+    holds step 16 and its replay file 16 transitions. Resumed with --steps 32, the run starts
+    from that checkpoint: the step goes 16 -> 32, the replay holds all 32 transitions (16
+    restored + 16 new: a replay started afresh would hold 16), and the metrics history carries
+    on from the rows saved before the kill."""
+    run = tmp_path / "run"
+    round_ = PrimitiveTrainer._round
+
+    def killed_at_20(self, *args):
+        if self.global_step >= 20:
+            raise KeyboardInterrupt
+        return round_(self, *args)
+
+    monkeypatch.setattr(PrimitiveTrainer, "_round", killed_at_20)
+    assert _train(run, 24, "--set", "checkpoint_every=8") == 130
+    assert "interrupted (SIGINT)" in capsys.readouterr().err
+    before = _checkpoint(run)
+    assert before["global_step"] == 16 and before["replay_file"] == "replay_000000016.npz"
+    assert len(ReplayBuffer.load(run / "checkpoints" / before["replay_file"])) == 16
+    assert [row["step"] for row in before["history"]] == [8, 16]
+    assert not (run / "metrics.json").exists()  # written when a run ends, not at a kill
+
+    monkeypatch.setattr(PrimitiveTrainer, "_round", round_)
+    assert main(["train", "--out", str(run), "--steps", "32", "--no-progress"]) == 0
+    assert f"resume {run}" in capsys.readouterr().out
+    after = _checkpoint(run)
+    assert after["global_step"] == 32 and after["replay_file"] == "replay_000000032.npz"
+    assert len(ReplayBuffer.load(run / "checkpoints" / after["replay_file"])) == 32
+    assert after["episodes"] >= before["episodes"]
+    assert after["learner"]["updates"] > before["learner"]["updates"]
+    history = json.loads((run / "metrics.json").read_text())["history"]
+    assert [row["step"] for row in history] == [8, 16, 24, 32]
+    assert history[:2] == before["history"]  # the rows from before the kill, as saved
+    assert history[-1]["replay"] == 32
+
+
+# --- ship, evaluate and gallery ----------------------------------------------------------------
+@pytest.fixture(scope="module")
+def shipped(tmp_path_factory):
+    """A tiny trained run, its evaluation on a two-object library's unseen object, and the
+    folder `ship` made of it: (run, library, the run's report, shipped folder, ship's output)."""
+    import contextlib
+    import io
+
+    from tests.fixtures import write_loadable_library
+
+    root = tmp_path_factory.mktemp("primitive_ship")
+    run, library = root / "run", write_loadable_library(root / "lib", 1, num_unseen=1)
+    assert _train(run, 24) == 0
+    report = root / "eval_run.json"
+    assert main(["evaluate", "--run", str(run), "--objects", str(library), "--split", "unseen",
+                 "--episodes", "2", "--record", "0", "--no-progress", "--report",
+                 str(report)]) == 0
+    out, printed = root / "weights" / "push_primitive", io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["ship", "--run", str(run), "--report", str(report), "--library-command",
+                     f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                     "--train-command", "corn-drake train --policy primitive ...",
+                     "--out", str(out)]) == 0
+    return run, library, json.loads(report.read_text()), out, printed.getvalue()
+
+
+def _check_report(report: dict, episodes: int) -> None:
+    assert report["policy"] == "primitive" and report["env_steps_unit"] == "primitives"
+    rows = report["episodes"]
+    assert len(rows) == episodes and all("failure" in row for row in rows)
+    counts = report["failure_counts"]
+    assert sum(counts.values()) == episodes
+    for category, n in collections.Counter(row["failure"] for row in rows).items():
+        assert counts[category] == n, (category, counts)
+
+
+def test_a_shipped_primitive_folder_holds_what_evaluate_reads_and_evaluates_as_the_run(
+        shipped, tmp_path, capsys):
+    run, library, report, out, printed = shipped
+    _check_report(report, 2)
+    assert report["env_steps"] == 24
+    assert "24 primitives" in printed
+    card = json.loads((out / "card.json").read_text())
+    teacher_card = json.loads((WEIGHTS / "push_corn" / "card.json").read_text())
+    assert set(teacher_card) <= set(card), set(teacher_card) - set(card)  # a card like the others
+    assert card["policy"] == "primitive" and card["env_steps"] == 24
+    assert card["env_steps_unit"] == "primitives" and card["episodes"] == 2
+    assert card["success_rate"] == report["success_rate"] and card["source_run"] == str(run)
+    assert card["encoder"]["file"] == "encoder.pt" and card["encoder"]["kind"] == "corn"
+    # What evaluate needs and nothing else: the replay files stay with the run.
+    assert sorted(card["bytes"]) == ["checkpoints/last.pt", "config.yaml", "encoder.pt"]
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == \
+        ["card.json", "checkpoints/last.pt", "config.yaml", "encoder.pt"]
+    assert list((run / "checkpoints").glob("replay_*.npz"))  # the run had one to leave behind
+    assert set(load_checkpoint(out / "checkpoints" / "last.pt")) == {"agent", "global_step"}
+
+    again = tmp_path / "eval_shipped.json"
+    assert main(["evaluate", "--run", str(out), "--objects", str(library), "--split", "unseen",
+                 "--episodes", "2", "--record", "0", "--no-progress", "--report",
+                 str(again)]) == 0
+    second = json.loads(again.read_text())
+    _check_report(second, 2)
+    assert second["run"] == str(out) and second["env_steps"] == 24
+    # The same weights, objects and seeds: the same episodes.
+    for mine, theirs in zip(second["episodes"], report["episodes"]):
+        assert (mine["object"], mine["seed"], mine["success"], mine["steps"]) == \
+            (theirs["object"], theirs["seed"], theirs["success"], theirs["steps"])
+        assert mine["position_error"] == pytest.approx(theirs["position_error"], abs=1e-6)
+
+    capsys.readouterr()
+    assert main(["evaluate", "--run", str(out), "--attention", "--report",
+                 str(tmp_path / "no.json")]) == 2
+    _one_error_line(capsys, "--attention", "contact-primitive", "Meshcat")
+    assert not (tmp_path / "no.json").exists()
+
+
+def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path):
+    """The stills come from evaluate's own episode of the object and seed (the report's first),
+    the cloud painted by the policy's location scores."""
+    _, library, report, out, _ = shipped
+    first = report["episodes"][0]
+    gallery = tmp_path / "gallery"
+    assert main(["gallery", "--run", str(out), "--objects", str(library), "--ids",
+                 first["object"], "--out", str(gallery)]) == 0
+    data = json.loads((gallery / "gallery.json").read_text())
+    assert data["policy"] == "primitive" and data["painted"] == "location scores"
+    entry = data["episodes"][0]
+    assert (entry["seed"], entry["success"], entry["steps"]) == \
+        (first["seed"], first["success"], first["steps"])
+    assert entry["position_error"] == pytest.approx(first["position_error"], abs=1e-6)
+    assert entry["primitives"] >= 1 and entry["steps_shown"] == [0, first["steps"] // 2,
+                                                                 first["steps"]]
+    assert min(entry["points_painted"]) > 10
+    assert (gallery / entry["image"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# --- bench -------------------------------------------------------------------------------------
+def test_bench_primitive_reports_its_rates_against_the_dense_teacher(tmp_path):
+    path = tmp_path / "bench.json"
+    assert main(["bench", "primitive", "--report", str(path), "--decisions", "2",
+                 "--dense-steps", "2", "--updates", "2", "--warmup", "0",
+                 "--batch-size", "4"]) == 0
+    report = json.loads(path.read_text())
+    assert report["benchmark"] == "primitive" and "cpu_count" in report["machine"]
+    r = report["results"]
+    for key in ("primitive_decisions_per_s", "primitive_forward_ms_per_decision",
+                "primitive_env_ms_per_decision", "primitive_policy_periods_per_s",
+                "td3_updates_per_s", "td3_update_ms", "dense_policy_steps_per_s",
+                "dense_forward_ms_per_step"):
+        assert r[key] > 0, key
+    assert r["policy_periods_per_decision"] >= 1  # a primitive is a whole approach and push
+    assert r["decisions_to_dense_steps"] == pytest.approx(
+        r["primitive_decisions_per_s"] / r["dense_policy_steps_per_s"])
+    assert r["periods_to_dense_steps"] == pytest.approx(
+        r["primitive_policy_periods_per_s"] / r["dense_policy_steps_per_s"])
+    assert r["forward_primitive_to_dense"] == pytest.approx(
+        r["primitive_forward_ms_per_decision"] / r["dense_forward_ms_per_step"])
+    assert (r["decisions"], r["updates"], r["batch_size"], r["replay_transitions"]) == (2, 2, 4, 2)
+    assert r["encoder"] == "random" and r["task"] == "push"
