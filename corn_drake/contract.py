@@ -129,3 +129,23 @@ def check_action(action) -> np.ndarray:
 # Finished episodes behind a training history row's success rate, return and tracking error (the
 # trainers' recent-episode window; the learning curves start where a run has filled it).
 RECENT_EPISODES = 100
+
+
+# --- the contact-primitive policy ------------------------------------------------------------
+# A primitive (PrimitiveExecutor's `primitive` input): contact point (3, world), its outward
+# normal (3), push motion (3, in [-1, 1], times PrimitiveConfig.push_distance), the chosen
+# location's cloud index, the sequence number that starts it (executor count + 1).
+PRIMITIVE_DIM = 11
+PRIMITIVE_POINT, PRIMITIVE_NORMAL, PRIMITIVE_MOTION = slice(0, 3), slice(3, 6), slice(6, 9)
+PRIMITIVE_LOCATION, PRIMITIVE_SEQUENCE = 9, 10
+# The executor's `status` output: its phase, ticks in that phase, primitives started, whether
+# the pre-contact pose was reached (1, 0, or -1 while pending), the current primitive's cloud
+# index, its pre-contact point and the last commanded tool target.
+PRIMITIVE_STATUS_LAYOUT = {"phase": 0, "ticks": 1, "count": 2, "reached": 3, "location": 4,
+                           "pre_contact": slice(5, 8), "target": slice(8, 11)}
+PRIMITIVE_STATUS_DIM = 11
+# PrimitivePolicySystem's held `choice`: cloud index, location index, motion (3).
+PRIMITIVE_CHOICE_DIM = 5
+# Per-location features beside the token: position from the object's origin, goal flow,
+# outward normal (3 each; nn/primitive_features.py).
+PRIMITIVE_LOCAL_DIM = 9

@@ -88,7 +88,7 @@ def test_greedy_policy_touches_the_rewarded_location_with_a_positive_push(traine
     assert scores[:, GOOD_LOCATION].mean() > scores[:, [0, 1, 3]].mean()
 
 
-def test_update_target_is_reward_plus_discounted_best_location_of_min_q():
+def test_update_target_is_reward_plus_discounted_min_q_where_the_online_policy_acts():
     settings = TD3Settings(gamma=0.9, policy_delay=1000)  # no actor step: targets stay fixed
     learner = _learner(seed=3, settings=settings)
     batch = _filled_buffer(n=16, seed=3).sample(16, np.random.default_rng(0))
@@ -102,7 +102,11 @@ def test_update_target_is_reward_plus_discounted_best_location_of_min_q():
         next_motions = (next_motions + noise.clamp(-s.target_noise_clip,
                                                    s.target_noise_clip)).clamp(-1, 1)
         q1n, q2n = twin.critic_target(batch["next_features"], next_motions)
-        y = batch["reward"] + s.gamma * (1 - batch["done"]) * torch.minimum(q1n, q2n).amax(1)
+        # s' is valued where the online policy would act: its own best-scoring location.
+        online, _ = twin.critic(batch["next_features"], twin.actor(batch["next_features"]))
+        chosen = online.argmax(1)
+        value = torch.minimum(q1n, q2n)[torch.arange(16), chosen]
+        y = batch["reward"] + s.gamma * (1 - batch["done"]) * value
         # Score the taken motion at the taken location only: put it at every location.
         taken = batch["motion"][:, None, :].expand(-1, L, -1)
         q1, q2 = twin.critic(batch["features"], taken)
@@ -279,3 +283,53 @@ def test_heads_shapes_and_bad_input():
         critic(features, motions[:, :2])
     with pytest.raises(ValueError, match="policy_delay"):
         TD3Settings(policy_delay=0)
+
+
+# ------------------------------------------------------------------------------- the location mask
+
+def _masked_state(rng, usable):
+    state = _state(rng)
+    state["mask"] = np.asarray(usable, np.float32)
+    return state
+
+
+def test_masked_locations_are_never_chosen_and_never_bootstrapped_from():
+    rng = np.random.default_rng(5)
+    learner = _learner(seed=5, settings=TD3Settings(gamma=0.9, policy_delay=1000))
+    usable = np.zeros(L, np.float32)
+    usable[1] = 1.0  # one usable location per state
+    states = [_masked_state(rng, usable) for _ in range(32)]
+    batch = {k: torch.as_tensor(np.stack([s[k] for s in states])) for k in states[0]}
+    scores = learner.scores(batch)
+    assert torch.isinf(scores[:, [0, 2, 3]]).all() and torch.isfinite(scores[:, 1]).all()
+    greedy, _, _ = learner.select(batch, greedy=True)
+    sampled, _, _ = learner.select(batch, greedy=False, temperature=10.0, motion_noise=0.1,
+                                   rng=np.random.default_rng(0))
+    assert (greedy == 1).all() and (sampled == 1).all()
+    # The target values s' at its only usable location, whatever the ruled-out locations'
+    # (never trained) estimates say.
+    buffer = ReplayBuffer(64)
+    for s in states:
+        buffer.add(s, 1, np.zeros(3, np.float32), 0.5, False, s)
+    sample = buffer.sample(16, np.random.default_rng(1))
+    twin = copy.deepcopy(learner)
+    with torch.no_grad():
+        st = twin.settings
+        nxt = sample["next_features"]
+        motions = twin.actor_target(nxt)
+        noise = torch.randn(motions.shape, generator=twin.generator) * st.target_noise
+        motions = (motions + noise.clamp(-st.target_noise_clip, st.target_noise_clip)).clamp(-1, 1)
+        q1n, q2n = twin.critic_target(nxt, motions)
+        y = sample["reward"] + st.gamma * torch.minimum(q1n, q2n)[:, 1]
+        q1, q2 = twin.critic(twin._at_location(sample["features"], sample["location"]),
+                             sample["motion"].unsqueeze(1))
+        expected = ((q1.squeeze(1) - y) ** 2).mean() + ((q2.squeeze(1) - y) ** 2).mean()
+    assert learner.update(sample)["critic_loss"] == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_a_state_with_no_usable_location_keeps_all_of_them():
+    rng = np.random.default_rng(6)
+    learner = _learner(seed=6)
+    state = _masked_state(rng, np.zeros(L, np.float32))
+    batch = {k: torch.as_tensor(v)[None] for k, v in state.items()}
+    assert torch.isfinite(learner.scores(batch)).all()

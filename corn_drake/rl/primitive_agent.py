@@ -39,8 +39,14 @@ class PrimitiveAgent(nn.Module):
     kind = AGENT_KIND
     has_attention = False  # the dense policies' patch attention; this one shows its scores
 
-    def __init__(self, encoder, locations: str = "patch", hidden: int = 256):
+    def __init__(self, encoder, locations: str = "patch", hidden: int = 256,
+                 primitive_config=None):
+        """`primitive_config`: how the executor runs the primitives (PrimitiveConfig; the
+        default one when None): which locations it would give up decides the mask."""
         super().__init__()
+        from corn_drake.config.primitive import PrimitiveConfig
+
+        self.primitive_config = primitive_config or PrimitiveConfig()
         if getattr(encoder, "kind", None) not in ("corn", "p2v-lite", "rot"):
             raise ValueError(f"the primitive policy needs a patch encoder (corn), got "
                              f"{getattr(encoder, 'kind', type(encoder).__name__)!r}")
@@ -55,17 +61,38 @@ class PrimitiveAgent(nn.Module):
 
     @torch.no_grad()
     def features(self, obs: dict[str, np.ndarray]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
-        """(features, candidates) of a batch of observations (numpy, batched)."""
+        """(features, candidates) of a batch of observations (numpy, batched). The features'
+        "mask" (B, L) marks the locations the executor would not give up at once: a point whose
+        pre-contact point lies below the table (the object's underside,
+        PrimitivePlanner._start). The policy never chooses the others, so greedy evaluation
+        cannot repeat a primitive that does nothing episode-long."""
         _, batch = obs_to_torch(obs)
         self.encoder.eval()
-        return location_features(self.encoder, batch, self.locations)
+        features, candidates = location_features(self.encoder, batch, self.locations)
+        features["mask"] = self._reachable(batch, candidates)
+        return features, candidates
+
+    def _reachable(self, batch: dict[str, torch.Tensor], candidates: torch.Tensor) -> torch.Tensor:
+        from corn_drake.nn.patchify import gather_points
+        from corn_drake.scene.objects import TABLE_TOP_Z
+
+        cfg = self.primitive_config
+        z = gather_points(batch["cloud"], candidates)[..., 2]
+        nz = gather_points(batch["normals"], candidates)[..., 2]
+        natural = z + cfg.pre_contact_distance * nz  # the normals are unit vectors
+        floor = TABLE_TOP_Z + cfg.min_tool_height - cfg.reach_tolerance
+        return (natural >= floor).float()
 
     @torch.no_grad()
     def scores_and_motions(self, features: dict[str, torch.Tensor]
                            ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(per-location scores, -inf where features["mask"] rules a location out; the actor's
+        motions)."""
+        from corn_drake.rl.td3 import masked
+
         motions = self.actor(features)
         q1, _ = self.critic(features, motions)
-        return q1, motions
+        return masked(q1, features), motions
 
     def choose(self, obs: dict[str, np.ndarray]) -> dict:
         """The greedy choice for one observation: {"point" (cloud index), "motion" (3,),
@@ -76,9 +103,14 @@ class PrimitiveAgent(nn.Module):
         features, candidates = self.features(obs)
         scores, motions = self.scores_and_motions(features)
         location = int(torch.argmax(scores[0]))
+        shown = scores[0].numpy().astype(np.float64)
+        finite = np.isfinite(shown)
+        # Ruled-out locations show as the lowest score (displays colour by score).
+        shown[~finite] = shown[finite].min() if finite.any() else 0.0
         return {"point": int(candidates[0, location]),
                 "motion": motions[0, location].numpy().astype(np.float64),
-                "location": location, "scores": scores[0].numpy().astype(np.float64),
+                "location": location, "scores": shown,
+                "usable": features["mask"][0].numpy() > 0.5,
                 "candidates": candidates[0].numpy()}
 
     def network_state(self) -> dict:
@@ -120,9 +152,8 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
     encoder = load_encoder("corn", run_encoder_path(run_dir, cfg.encoder), cfg.allow_weak_encoder)
-    agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden)
+    agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive)
     agent.load_network_state(state["agent"], used)
     agent.eval()
-    agent.primitive_config = cfg.primitive
     agent.checkpoint_file = used.name
     return cfg, agent, int(state["global_step"])

@@ -52,7 +52,7 @@ class PrimitiveTrainer:
         self.cfg, self.out = cfg, Path(out)
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
-        self.agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden)
+        self.agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive)
         self.learner = TD3Learner(self.agent.actor, self.agent.critic, td3_settings(cfg),
                                   seed=cfg.seed)
         self.replay = ReplayBuffer(cfg.replay_capacity)
@@ -104,7 +104,11 @@ class PrimitiveTrainer:
         cfg = self.cfg
         n, num_locations = candidates.shape
         if self.global_step < cfg.random_steps:
-            locations = self.np_rng.integers(0, num_locations, n)
+            # Uniform over each state's usable locations (all of them if none is usable).
+            usable = features["mask"].numpy() > 0.5
+            usable |= ~usable.any(axis=1, keepdims=True)
+            weights = usable / usable.sum(axis=1, keepdims=True)
+            locations = np.array([self.np_rng.choice(num_locations, p=w) for w in weights])
             motions = self.np_rng.uniform(-1.0, 1.0, (n, 3)).astype(np.float32)
         else:
             locations, motions, _ = self.learner.select(

@@ -47,16 +47,17 @@ from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.scene import ControllerConfig
-from corn_drake.contract import ACTION_DIM, ACTION_SLICES, NUM_JOINTS
+from corn_drake.contract import (ACTION_DIM, ACTION_SLICES, NUM_JOINTS, PRIMITIVE_DIM,
+                                 PRIMITIVE_LOCATION, PRIMITIVE_MOTION, PRIMITIVE_NORMAL,
+                                 PRIMITIVE_POINT, PRIMITIVE_SEQUENCE)
+# The `status` output's layout (the contract's), under the names the env and views use.
+from corn_drake.contract import PRIMITIVE_STATUS_DIM as STATUS_DIM
+from corn_drake.contract import PRIMITIVE_STATUS_LAYOUT as STATUS_LAYOUT
 from corn_drake.scene.objects import TABLE_TOP_Z
 from corn_drake.systems.observations import ObservationLayout
 from corn_drake.timing import PolicyClock
 from corn_drake.transforms import from_pose9
 
-# The primitive input: point (3), normal (3), motion (3, normalised), location, sequence.
-PRIMITIVE_DIM = 11
-PRIMITIVE_POINT, PRIMITIVE_NORMAL, PRIMITIVE_MOTION = slice(0, 3), slice(3, 6), slice(6, 9)
-PRIMITIVE_LOCATION, PRIMITIVE_SEQUENCE = 9, 10
 
 IDLE, APPROACH, DESCEND, PUSH, RETREAT = range(5)
 PHASES = ("idle", "approach", "descend", "push", "retreat")
@@ -69,12 +70,8 @@ _Z_SAFE = 12
 _ANCHOR = slice(13, 16)  # where the retreat started
 _TARGET = slice(16, 19)  # the last commanded target
 _FACING = slice(19, 21)  # the contact normal's horizontal direction (zeros: a top contact)
-_MEMORY_DIM = 21
+_MEMORY_SIZE = 21
 
-# The `status` output.
-STATUS_LAYOUT = {"phase": 0, "ticks": 1, "count": 2, "reached": 3, "location": 4,
-                 "pre_contact": slice(5, 8), "target": slice(8, 11)}
-STATUS_DIM = 11
 
 _DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -130,7 +127,7 @@ class PrimitivePlanner:
 
     @staticmethod
     def initial_memory() -> np.ndarray:
-        m = np.zeros(_MEMORY_DIM)
+        m = np.zeros(_MEMORY_SIZE)
         m[_REACHED], m[_LOCATION] = -1.0, -1.0
         return m
 

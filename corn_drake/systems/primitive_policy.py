@@ -24,12 +24,12 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from corn_drake.contract import POSITION_DIM
+from corn_drake.contract import PRIMITIVE_CHOICE_DIM as CHOICE_DIM
 from corn_drake.systems.observations import ObservationLayout
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM,
                                                    STATUS_LAYOUT, make_primitive)
 from corn_drake.timing import PolicyClock
 
-CHOICE_DIM = 5  # cloud index, location index, motion (3)
 
 
 def num_locations(agent, num_points: int) -> int:
