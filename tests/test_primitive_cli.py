@@ -217,3 +217,30 @@ def test_bench_primitive_reports_its_rates_against_the_dense_teacher(tmp_path):
         r["primitive_forward_ms_per_decision"] / r["dense_forward_ms_per_step"])
     assert (r["decisions"], r["updates"], r["batch_size"], r["replay_transitions"]) == (2, 2, 4, 2)
     assert r["encoder"] == "random" and r["task"] == "push"
+
+
+# --- a curriculum: --init-from -----------------------------------------------------------------
+def test_init_from_starts_with_the_source_runs_actor_and_critic(tmp_path, capsys):
+    import torch
+
+    source, run = tmp_path / "source", tmp_path / "run"
+    assert _train(source, 16) == 0
+    trainer = PrimitiveTrainer.__new__(PrimitiveTrainer)  # only to read what a new run loads
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.primitive import PrimitiveTrainConfig
+    from corn_drake.rl.pretrained_encoders import load_encoder
+
+    cfg = load_config(PrimitiveTrainConfig, source / "config.yaml")
+    cfg.init_from = str(source)
+    trainer.__init__(cfg, tmp_path / "unused", load_encoder("corn", ENCODER))
+    saved = _checkpoint(source)["agent"]
+    for name, value in trainer.agent.actor.state_dict().items():
+        assert torch.equal(value, saved["actor"][name]), name
+    for name, value in trainer.learner.critic_target.state_dict().items():
+        assert torch.equal(value, saved["critic"][name]), name
+    assert trainer.global_step == 0 and len(trainer.replay) == 0
+    # Through the command line, and a folder that is not a primitive run is refused.
+    assert _train(run, 8, "--init-from", str(source)) == 0
+    capsys.readouterr()
+    assert _train(tmp_path / "bad", 8, "--init-from", str(tmp_path / "nothing")) == 2
+    _one_error_line(capsys, "nothing")

@@ -227,9 +227,15 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
         cfg.env.scene.object.library = library
     write_run_config(cfg, out)
     _save_weights(out, {"agent": state["agent"], "global_step": state["global_step"]})
+    # Its learning curve travels too (the checkpoint's history rows): the run folder does not
+    # outlive its machine, and the card's number should come with how it was reached.
+    from corn_drake.storage.atomic_files import write_json
+
+    write_json(out / "training_history.json",
+               {"policy": cfg.policy, "task": cfg.env.task.name, "history": state.get("history", [])})
     return {"policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
-            "locations": cfg.locations,
+            "locations": cfg.locations, "training_history": "training_history.json",
             "encoder": {"file": "encoder.pt", "kind": agent.encoder.kind,
                         "pretraining": getattr(agent.encoder, "pretraining", None)}}
 

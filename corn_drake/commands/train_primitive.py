@@ -6,8 +6,9 @@ A new run's config: PrimitiveTrainConfig with its env built in layers — the ba
 `--task` overlay, the primitive layer (diagrams/primitive_rollout.yaml) — then --objects, the
 run flags train shares with distill (--steps counts primitives here), and `--set KEY=VALUE`
 (any PrimitiveTrainConfig field: `--set primitive.push_steps=3`, `--set batch_size=128`, the env
-sections without `env.`). A resume takes OUT alone; changes follow `train`'s rules. The PPO
-flags (--rollout-steps, --minibatches, --init-log-std, --init-from) do not apply and are refused.
+sections without `env.`). A resume takes OUT alone; changes follow `train`'s rules.
+`--init-from RUN` starts from another primitive run's actor and critic (a curriculum). The PPO
+flags (--rollout-steps, --minibatches, --init-log-std) do not apply and are refused.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from corn_drake.arguments.run_flags import RESUME_MAY_CHANGE, RESUME_MAY_GROW, R
 from corn_drake.errors import InputError
 from corn_drake.rl.policy_kinds import PRIMITIVE_POLICY
 
-PPO_ONLY_FLAGS = ("rollout_steps", "minibatches", "init_log_std", "init_from")
+PPO_ONLY_FLAGS = ("rollout_steps", "minibatches", "init_log_std")
 
 
 def wants_primitive(args) -> bool:
@@ -55,6 +56,8 @@ def requested_config(args, recorded):
             cfg = set_fields(cfg, {field: value}, "--" + dest.replace("_", "-"))
     if args.objects is not None:
         cfg = on_library(cfg, args.objects)
+    if args.init_from is not None:
+        cfg = set_fields(cfg, {"init_from": args.init_from}, "--init-from")
     return apply_sets(cfg, args.set)
 
 
@@ -64,6 +67,11 @@ def checked_config(cfg):
 
         library_train_ids(cfg.env.scene.object.library)
     cfg.check()
+    if cfg.init_from:
+        from corn_drake.run_folders.config_file import run_kind
+
+        if run_kind(cfg.init_from) != "primitive":
+            raise InputError(f"--init-from {cfg.init_from}: not a `train --policy primitive` run")
     if not cfg.encoder:
         raise InputError("--policy primitive needs --encoder FILE, the contact-pretrained CORN "
                          "encoder it reads (`corn-drake pretrain --model corn` writes "

@@ -60,6 +60,8 @@ class PrimitiveTrainer:
         self.recent_episodes: list[dict] = []
         self.checkpoint_dir = self.out / "checkpoints"
         self._load()
+        if self.global_step == 0 and cfg.init_from:
+            self._start_from(cfg.init_from)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         self.envs = make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
                                    cfg.ray_address, self.episodes // n_envs, cfg.primitive)
@@ -98,6 +100,19 @@ class PrimitiveTrainer:
         self.history, self.recent_episodes = state["history"], state["recent_episodes"]
         self.np_rng.bit_generator.state = state["np_rng"]
         torch.set_rng_state(state["torch_rng"])
+
+    def _start_from(self, run: str) -> None:
+        """A new run's actor and critic (and their targets) from another primitive run's
+        checkpoint; optimisers, replay and counters stay fresh."""
+        from corn_drake.errors import MissingInputError
+
+        path = Path(run) / "checkpoints" / "last.pt"
+        state = load_checkpoint(path, required=("agent",))
+        if state is None:
+            raise MissingInputError(f"--init-from {run}: no checkpoint ({path})")
+        self.agent.load_network_state(state["agent"], path)
+        self.learner.actor_target.load_state_dict(self.agent.actor.state_dict())
+        self.learner.critic_target.load_state_dict(self.agent.critic.state_dict())
 
     # --- one round of primitives -------------------------------------------------------------
     def _choose(self, features, candidates) -> tuple[np.ndarray, np.ndarray]:
