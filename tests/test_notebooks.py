@@ -23,11 +23,11 @@ from tests.paths import REPO_ROOT
 # Notebooks that record an episode leave a standalone Meshcat HTML file; the perception
 # notebook also leaves its depth images.
 RECORDING_NOTEBOOKS = {"01_scene_and_controller.ipynb", "04_teacher_rollout.ipynb",
-                       "05_perception.ipynb", "06_student.ipynb"}
+                       "05_perception.ipynb", "06_student.ipynb", "08_contact_primitives.ipynb"}
 EXPECTED_FIGURES = {"05_perception.ipynb": ["05_depth_images.png", "05_tracking_error.png"]}
 # How many figures each plotting notebook shows inline (image outputs of its cells).
 INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_student.ipynb": 2,
-                  "07_results.ipynb": 11}
+                  "07_results.ipynb": 11, "08_contact_primitives.ipynb": 1}
 # 04 renders a gallery still; 06 runs the student's cameras.
 NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb", "06_student.ipynb"}
 # 02 builds an object library and 03 contact data (about 50 and 30 s measured); 04 and 06 build

@@ -147,10 +147,11 @@ def test_a_shipped_primitive_folder_holds_what_evaluate_reads_and_evaluates_as_t
     assert card["env_steps_unit"] == "primitives" and card["episodes"] == 2
     assert card["success_rate"] == report["success_rate"] and card["source_run"] == str(run)
     assert card["encoder"]["file"] == "encoder.pt" and card["encoder"]["kind"] == "corn"
-    # What evaluate needs and nothing else: the replay files stay with the run.
-    assert sorted(card["bytes"]) == ["checkpoints/last.pt", "config.yaml", "encoder.pt"]
+    # What evaluate needs, and the learning curve; the replay files stay with the run.
+    assert sorted(card["bytes"]) == ["checkpoints/last.pt", "config.yaml", "encoder.pt",
+                                     "training_history.json"]
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()) == \
-        ["card.json", "checkpoints/last.pt", "config.yaml", "encoder.pt"]
+        ["card.json", "checkpoints/last.pt", "config.yaml", "encoder.pt", "training_history.json"]
     assert list((run / "checkpoints").glob("replay_*.npz"))  # the run had one to leave behind
     assert set(load_checkpoint(out / "checkpoints" / "last.pt")) == {"agent", "global_step"}
 

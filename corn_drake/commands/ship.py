@@ -209,6 +209,17 @@ def _copy_encoder(cfg, out: Path) -> None:
     cfg.encoder = "encoder.pt"
 
 
+def _identical_sibling_encoder(encoder: str, out: Path) -> str | None:
+    """"../NAME/encoder.pt" when a sibling of the weights folder `out` holds an encoder.pt with
+    the same bytes as `encoder`; None otherwise."""
+    import filecmp
+
+    for sibling in sorted(out.resolve().parent.glob("*/encoder.pt")):
+        if sibling.parent.name != out.name and filecmp.cmp(sibling, encoder, shallow=False):
+            return f"../{sibling.parent.name}/encoder.pt"
+    return None
+
+
 def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a contact-primitive run's config, actor and critic and encoder into `out`; its
     card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
@@ -222,7 +233,15 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     _make_folder(out)
     # A run's config names its own copy, encoder.pt, relative to the run folder.
     cfg.encoder = run_encoder_path(run_dir, cfg.encoder)
-    _copy_encoder(cfg, out)
+    shared = _identical_sibling_encoder(cfg.encoder, out)
+    if shared is None:
+        _copy_encoder(cfg, out)
+    else:
+        # The frozen encoder is byte for byte a sibling weights folder's (the primitive policies
+        # read the shipped push_corn encoder): named there, not copied, so models/weights stays
+        # within its size budget (tests/test_shipped_weights.py). evaluate resolves it relative
+        # to this folder (rl/checkpoints.run_encoder_path).
+        cfg.encoder = shared
     if cfg.env.scene.object.kind == "library":
         cfg.env.scene.object.library = library
     write_run_config(cfg, out)
@@ -232,11 +251,12 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     from corn_drake.storage.atomic_files import write_json
 
     write_json(out / "training_history.json",
-               {"policy": cfg.policy, "task": cfg.env.task.name, "history": state.get("history", [])})
+               {"policy": cfg.policy, "task": cfg.env.task.name,
+                "history": state.get("history", [])})
     return {"policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
             "locations": cfg.locations, "training_history": "training_history.json",
-            "encoder": {"file": "encoder.pt", "kind": agent.encoder.kind,
+            "encoder": {"file": cfg.encoder, "kind": agent.encoder.kind,
                         "pretraining": getattr(agent.encoder, "pretraining", None)}}
 
 

@@ -25,7 +25,8 @@ class PrimitiveConfig:
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {"pre_contact_distance": "> 0", "clearance": "> 0", "min_tool_height": ">= 0",
               "push_distance": "> 0", "push_steps": ">= 1", "retreat_height": ">= 0",
-              "retreat_steps": ">= 1", "reach_tolerance": "> 0", "turn_tolerance": "> 0", "approach_steps": ">= 1",
+              "retreat_steps": ">= 1", "reach_tolerance": "> 0", "turn_tolerance": "> 0",
+              "approach_steps": ">= 1",
               "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
               "progress_reward": ">= 0"}
     # The tool point stops this far off the surface along the normal before the push. The

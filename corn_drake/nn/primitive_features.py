@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import torch
 
-from corn_drake.contract import PRIMITIVE_LOCAL_DIM as LOCAL_DIM
+
 from corn_drake.nn.geometry import matrix_from_rot6d
 from corn_drake.nn.patchify import gather_points, patch_indices
 

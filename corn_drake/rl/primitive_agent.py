@@ -17,7 +17,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.nn.primitive_features import LOCAL_DIM, global_dim, location_features
+from corn_drake.contract import PRIMITIVE_LOCAL_DIM as LOCAL_DIM
+from corn_drake.nn.primitive_features import global_dim, location_features
 from corn_drake.nn.primitive_heads import PrimitiveActor, PrimitiveCritic
 
 AGENT_KIND = "primitive"

@@ -25,8 +25,8 @@ that points the fingers straight down and, for a side contact, turns the hand's 
 toward the surface (facing_rotation: the 0.205 m wide palm, 4.5 cm above the tool point, would
 otherwise land on the top of a tall object beside a low contact point; the descent waits until
 the turn is within turn_tolerance), and the configured stiffness and damping. A contact point
-on the object's underside (its pre-contact point below the table) is given up at once. Physics is the teacher diagram's own: the hand moves
-only through the controller.
+on the object's underside (its pre-contact point below the table) is given up at once.
+Physics is the teacher diagram's own: the hand moves only through the controller.
 
 The plan of a tick (next memory, action) is a pure function of the memory (discrete state), the
 observation and, when idle, the primitive input; one cache entry computes it, and both the
@@ -264,7 +264,8 @@ class PrimitiveExecutor(LeafSystem):
         self._plan = self.DeclareCacheEntry(
             "tick plan: (next memory, action)",
             ValueProducer(allocate=lambda: AbstractValue.Make((None, None)), calc=self._calc_plan),
-            {self.discrete_state_ticket(self._memory), self.input_port_ticket(self._obs.get_index()),
+            {self.discrete_state_ticket(self._memory),
+             self.input_port_ticket(self._obs.get_index()),
              self.input_port_ticket(self._primitive.get_index())})
         self.DeclarePeriodicDiscreteUpdateEvent(clock.period, clock.offset, self._update)
         self.DeclareVectorOutputPort("action", ACTION_DIM, self._calc_action,

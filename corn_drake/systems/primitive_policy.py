@@ -57,7 +57,8 @@ class PrimitivePolicySystem(LeafSystem):
         # The last choice the executor took (recorded at the tick it took it, from the same
         # cached forward pass), held for displays and tests: [cloud index, location index,
         # motion (3), scores (L)]. Reading it never runs the network.
-        self._held = self.DeclareDiscreteState(np.full(CHOICE_DIM + num_locations(agent, num_points), -1.0))
+        self._held = self.DeclareDiscreteState(
+            np.full(CHOICE_DIM + num_locations(agent, num_points), -1.0))
         self.DeclarePeriodicDiscreteUpdateEvent(clock.period, clock.offset, self._record)
         held = {self.discrete_state_ticket(self._held)}
         self.DeclareVectorOutputPort("choice", CHOICE_DIM, self._held_slice(0, CHOICE_DIM), held)
