@@ -75,14 +75,11 @@ class PrimitiveAgent(nn.Module):
 
     def _reachable(self, batch: dict[str, torch.Tensor], candidates: torch.Tensor) -> torch.Tensor:
         from corn_drake.nn.patchify import gather_points
-        from corn_drake.scene.objects import TABLE_TOP_Z
+        from corn_drake.systems.primitive_executor import reachable_from_above
 
-        cfg = self.primitive_config
         z = gather_points(batch["cloud"], candidates)[..., 2]
-        nz = gather_points(batch["normals"], candidates)[..., 2]
-        natural = z + cfg.pre_contact_distance * nz  # the normals are unit vectors
-        floor = TABLE_TOP_Z + cfg.min_tool_height - cfg.reach_tolerance
-        return (natural >= floor).float()
+        nz = gather_points(batch["normals"], candidates)[..., 2]  # unit normals
+        return reachable_from_above(z, nz, self.primitive_config).float()
 
     @torch.no_grad()
     def scores_and_motions(self, features: dict[str, torch.Tensor]

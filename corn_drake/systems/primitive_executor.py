@@ -116,6 +116,16 @@ def fingers_down(R_tool: np.ndarray) -> np.ndarray:
     return RotationMatrix(AngleAxis(angle, axis / np.linalg.norm(axis))).matrix() @ R_tool
 
 
+def reachable_from_above(point_z, normal_z, cfg: PrimitiveConfig):
+    """Whether a contact point (its height, its unit normal's z) has its pre-contact point above
+    the table. One below it (a point on the object's underside) would, raised above the table,
+    lie inside the object, and the hand would press on the object from above: the executor
+    gives such a primitive up at once, and the policy never chooses one (its location mask,
+    rl/primitive_agent.py). Plain arithmetic: floats, numpy arrays or torch tensors."""
+    natural = point_z + cfg.pre_contact_distance * normal_z
+    return natural >= TABLE_TOP_Z + cfg.min_tool_height - cfg.reach_tolerance
+
+
 class PrimitivePlanner:
     """The executor's tick as plain numpy: `plan(memory, tool_p, tool_R, top_z, primitive)` ->
     (next memory, action). Kept apart from the LeafSystem so tests can drive it directly."""
@@ -152,12 +162,8 @@ class PrimitivePlanner:
         horizontal = np.linalg.norm(normal[:2])
         m[_FACING] = normal[:2] / horizontal if horizontal > 0.3 * np.linalg.norm(normal) \
             else 0.0
-        natural = primitive[PRIMITIVE_POINT][2] + cfg.pre_contact_distance * (
-            normal[2] / max(np.linalg.norm(normal), 1e-9))
-        if pre[2] - natural > cfg.reach_tolerance:
-            # The pre-contact point would lie below the table (a point on the object's
-            # underside): raised above the table it would be inside the object, and the hand
-            # would press on it from above. Given up at once, unreached.
+        if not reachable_from_above(primitive[PRIMITIVE_POINT][2],
+                                    normal[2] / max(np.linalg.norm(normal), 1e-9), cfg):
             m[_REACHED] = 0.0
             self._enter(m, RETREAT)
 
