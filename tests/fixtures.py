@@ -70,3 +70,13 @@ def write_loadable_library(root: Path, num_train: int, num_unseen: int = 1) -> P
                         "unit_inertia": f"{oid}/unit_inertia.npy"})
     (root / "manifest.json").write_text(json.dumps({"objects": objects, "rejected": []}))
     return root
+
+
+def one_error_line(capsys, *needles: str) -> str:
+    """The captured stderr of a refused command: one line, no traceback, holding each of
+    `needles` (the flag or file it names); returned for further checks."""
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    return err

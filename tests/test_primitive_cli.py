@@ -17,6 +17,7 @@ from corn_drake.package_data import data_dir
 from corn_drake.rl.primitive_trainer import PrimitiveTrainer
 from corn_drake.rl.replay import ReplayBuffer
 from corn_drake.storage.checkpoint_files import load_checkpoint
+from tests.fixtures import one_error_line
 
 WEIGHTS = data_dir("models") / "weights"
 ENCODER = str(WEIGHTS / "push_corn" / "encoder.pt")
@@ -30,14 +31,6 @@ def _train(out, steps: int, *extra: str) -> int:
                  str(out), *extra])
 
 
-def _one_error_line(capsys, *needles: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, (needle, err)
-    return err
-
-
 def _checkpoint(run) -> dict:
     return load_checkpoint(run / "checkpoints" / "last.pt", fallback=False)
 
@@ -48,7 +41,7 @@ def _checkpoint(run) -> dict:
 def test_train_primitive_refuses_a_ppo_flag_naming_it(tmp_path, capsys, flag, value):
     out = tmp_path / "run"
     assert _train(out, 8, flag, value) == 2
-    _one_error_line(capsys, flag, "PPO")
+    one_error_line(capsys, flag, "PPO")
     assert not (out / "config.yaml").exists()
 
 
@@ -56,7 +49,7 @@ def test_train_primitive_refuses_to_start_without_an_encoder(tmp_path, capsys):
     out = tmp_path / "run"
     argv = [a for a in TINY if a not in ("--encoder", ENCODER)]
     assert main(["train", "--policy", "primitive", *argv, "--steps", "8", "--out", str(out)]) == 2
-    _one_error_line(capsys, "--encoder")
+    one_error_line(capsys, "--encoder")
     assert not (out / "config.yaml").exists()
 
 
@@ -171,7 +164,7 @@ def test_a_shipped_primitive_folder_holds_what_evaluate_reads_and_evaluates_as_t
     capsys.readouterr()
     assert main(["evaluate", "--run", str(out), "--attention", "--report",
                  str(tmp_path / "no.json")]) == 2
-    _one_error_line(capsys, "--attention", "contact-primitive", "Meshcat")
+    one_error_line(capsys, "--attention", "contact-primitive", "Meshcat")
     assert not (tmp_path / "no.json").exists()
 
 
@@ -244,4 +237,4 @@ def test_init_from_starts_with_the_source_runs_actor_and_critic(tmp_path, capsys
     assert _train(run, 8, "--init-from", str(source)) == 0
     capsys.readouterr()
     assert _train(tmp_path / "bad", 8, "--init-from", str(tmp_path / "nothing")) == 2
-    _one_error_line(capsys, "nothing")
+    one_error_line(capsys, "nothing")

@@ -18,7 +18,7 @@ from corn_drake.cli import main
 from corn_drake.errors import InputError
 from corn_drake.run_folders.config_file import load_run_config
 from corn_drake.run_folders.guards import LOCK_NAME, lock_folder
-from tests.fixtures import write_tiny_library
+from tests.fixtures import one_error_line, write_tiny_library
 from tests.paths import REPO_ROOT
 
 # A one-update state run: 2 envs x 16 steps, 10-step episodes.
@@ -32,14 +32,6 @@ def _files(folder: Path) -> dict[str, bytes]:
     """Every file under `folder` (the lock file aside: it is no output) with its bytes."""
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
             if p.is_file() and p.name != LOCK_NAME}
-
-
-def _one_error_line(capsys, *needles: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, (needle, err)
-    return err
 
 
 @pytest.fixture(scope="module")
@@ -61,14 +53,14 @@ def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_st
     before = _files(run)
     capsys.readouterr()
     assert main([*TRAIN, "--policy", "e2e", "--steps", "32", "--out", str(run)]) == 2
-    _one_error_line(capsys, str(run), "--policy: recorded 'state', requested 'e2e'")
+    one_error_line(capsys, str(run), "--policy: recorded 'state', requested 'e2e'")
     assert main([*TRAIN, "--seed", "3", "--set", "ppo.lr=1e-5", "--steps", "32",
                  "--out", str(run)]) == 2
-    _one_error_line(capsys, "--seed: recorded 0, requested 3", "--set ppo.lr: recorded 0.0003")
+    one_error_line(capsys, "--seed: recorded 0, requested 3", "--set ppo.lr: recorded 0.0003")
     assert main([*TRAIN, "--steps", "16", "--out", str(run)]) == 2  # fewer steps than done
-    _one_error_line(capsys, "--steps: recorded 32, requested 16")
+    one_error_line(capsys, "--steps: recorded 32, requested 16")
     assert main(["train", "--set", "task.episode_steps=11", "--out", str(run)]) == 2
-    _one_error_line(capsys, "--task or --set task.episode_steps: recorded 10, requested 11")
+    one_error_line(capsys, "--task or --set task.episode_steps: recorded 10, requested 11")
     assert _files(run) == before  # config.yaml, checkpoint, metrics: all untouched
     # --steps may grow, and the recorded config is the rest: the run resumes from it with no
     # other argument, says what changed, and its config records the new total.
@@ -109,10 +101,10 @@ def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
     before = _files(run)
     capsys.readouterr()
     assert main([*TRAIN, "--steps", "96", "--out", str(run)]) == 2
-    _one_error_line(capsys, str(last), str(prev))
+    one_error_line(capsys, str(last), str(prev))
     assert main(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
                  "--report", str(report)]) == 2
-    _one_error_line(capsys, str(last))
+    one_error_line(capsys, str(last))
     assert _files(run) == before
 
 
@@ -161,7 +153,7 @@ def test_evaluate_refuses_an_unwritable_destination_before_any_episode(
         (tmp_path / "ev_recordings").write_text("")
     assert main(["evaluate", "--run", "still", "--episodes", "1", "--record", record,
                  "--report", str(report)]) == 2
-    _one_error_line(capsys, "--report" if record == "0" else "--record", "cannot write")
+    one_error_line(capsys, "--report" if record == "0" else "--record", "cannot write")
 
 
 # --- item 3: one writer per output folder -----------------------------------------------------
@@ -187,7 +179,7 @@ def test_second_train_into_a_running_run_is_refused_and_a_killed_one_leaves_no_l
         # (100,000 steps, far from its end) still trains. The order of events, not a time a
         # busy machine could exceed.
         assert first.poll() is None, "the first run ended before the second was refused"
-        _one_error_line(capsys, str(run), "in use", str(first.pid))
+        one_error_line(capsys, str(run), "in use", str(first.pid))
     finally:
         first.send_signal(signal.SIGKILL)
         first.wait()
@@ -219,7 +211,7 @@ def test_every_writing_command_refuses_a_locked_folder(tmp_path, capsys, command
                 "objects": ["--num", "1", "--drops", "8"]}[command]
         capsys.readouterr()
         assert main([command, *argv, "--out", str(out), "--no-progress"]) == 2
-        _one_error_line(capsys, str(out), "in use")
+        one_error_line(capsys, str(out), "in use")
         assert _files(out) == before
     finally:
         holder.send_signal(signal.SIGKILL)
@@ -241,12 +233,12 @@ def test_contact_data_refuses_another_seed_and_keeps_its_shards(tmp_path, capsys
     before = _files(out)
     capsys.readouterr()
     assert contact_data(seed=1) == 2
-    _one_error_line(capsys, str(out), "--seed: recorded 0, requested 1")
+    one_error_line(capsys, str(out), "--seed: recorded 0, requested 1")
     assert _files(out) == before
     # A dataset made before arguments.json was kept is checked against its manifest.
     (out / "arguments.json").unlink()
     assert contact_data(seed=0, shard_size=128) == 2
-    _one_error_line(capsys, "--shard-size: recorded 64, requested 128")
+    one_error_line(capsys, "--shard-size: recorded 64, requested 128")
     assert contact_data(seed=0) == 0  # the same arguments resume (nothing to redo)
     assert _files(out)["train/shard_00000.npz"] == before["train/shard_00000.npz"]
 
@@ -258,9 +250,9 @@ def test_objects_refuses_another_seed_and_grows_with_more_objects(tmp_path, caps
     before = _files(out)
     capsys.readouterr()
     assert main([*args, "--num", "1", "--seed", "1"]) == 2
-    _one_error_line(capsys, "--seed: recorded 0, requested 1")
+    one_error_line(capsys, "--seed: recorded 0, requested 1")
     assert main([*args, "--num", "1", "--drops", "9", "--seed", "0"]) == 2
-    _one_error_line(capsys, "--drops: recorded 8, requested 9")
+    one_error_line(capsys, "--drops: recorded 8, requested 9")
     assert _files(out) == before
     assert main([*args, "--num", "2", "--seed", "0"]) == 0
     assert len(json.loads((out / "manifest.json").read_text())["objects"]) == 2

@@ -21,6 +21,7 @@ from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.student_env import StudentEnv
 from corn_drake.run_folders.config_file import write_run_config
 from corn_drake.systems.ik import ActionScaling
+from tests.fixtures import one_error_line
 
 
 def _student(seed: int = 0) -> StudentPolicy:
@@ -222,13 +223,6 @@ def test_ship_a_student_run_evaluates_as_the_run(tmp_path, capsys):
     assert "checkpoint" in capsys.readouterr().err and not (tmp_path / "w3").exists()
 
 
-def _one_error_line(capsys, *needles: str) -> None:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, (needle, err)
-
-
 def test_evaluate_names_a_run_of_neither_kind_and_perception_without_a_student(tmp_path, capsys):
     from corn_drake.config.training import TrainConfig
 
@@ -237,24 +231,24 @@ def test_evaluate_names_a_run_of_neither_kind_and_perception_without_a_student(t
     odd.mkdir()
     (odd / "config.yaml").write_text("steps: 3\nmodel: corn\n")  # e.g. a pretraining config
     assert main(["evaluate", "--run", str(odd), "--report", str(report)]) == 2
-    _one_error_line(capsys, f"--run {odd}", "neither", "train", "distill")
+    one_error_line(capsys, f"--run {odd}", "neither", "train", "distill")
     teacher = tmp_path / "teacher"
     write_run_config(TrainConfig(), teacher)
     assert main(["evaluate", "--run", str(teacher), "--perception", "ground_truth",
                  "--report", str(report)]) == 2
-    _one_error_line(capsys, "--perception ground_truth", str(teacher), "teacher run")
+    one_error_line(capsys, "--perception ground_truth", str(teacher), "teacher run")
     assert main(["evaluate", "--run", "scripted", "--perception", "geometric",
                  "--report", str(report)]) == 2
-    _one_error_line(capsys, "--perception geometric", "reference controller")
+    one_error_line(capsys, "--perception geometric", "reference controller")
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main(["evaluate", "--run", str(empty), "--report", str(report)]) == 2
-    _one_error_line(capsys, str(empty / "config.yaml"), "distill")
+    one_error_line(capsys, str(empty / "config.yaml"), "distill")
     # A distill config without its student checkpoint.
     student = write_distill_run(tmp_path / "student")
     (student / "checkpoints" / "last.pt").unlink()
     assert main(["evaluate", "--run", str(student), "--report", str(report)]) == 2
-    _one_error_line(capsys, "no student checkpoint", str(student))
+    one_error_line(capsys, "no student checkpoint", str(student))
     assert not report.exists()
 
 
