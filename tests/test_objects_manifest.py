@@ -68,8 +68,8 @@ def test_writer_and_reader_round_trip_keeping_unknown_fields(tmp_path):
                                                unseen_group="member", radius=0.05,
                                                extra={"made_by": "a later version"})],
                         rejected=[Rejection("broken.obj", "not watertight")],
-                        split_rule={"seed": 3}, timings={"build_s": 2.0},
-                        extra={"note": "kept"})
+                        split_rule={"seed": 3},
+                        extra={"note": "kept", "timings": {"build_s": 2.0}})  # an older library's
     write_manifest(tmp_path, manifest)
     on_disk = json.loads((tmp_path / "manifest.json").read_text())
     assert on_disk["objects"][0]["made_by"] == "a later version" and on_disk["note"] == "kept"

@@ -2,20 +2,24 @@
 
 DIR/manifest.json follows the typed schema of assets/manifest.py (Manifest, LibraryObject,
 Rejection). Paths are relative to DIR; every file is written atomically, and a re-run skips
-objects already in the manifest. Splits follow assets/splits.py and are re-assigned over the
-whole manifest at every save.
+objects already in the manifest (built or rejected). Splits follow assets/splits.py and are
+re-assigned over the whole manifest at every save. The wall times of a build go to
+DIR/build_timings.json, the one file two builds of the same objects do not share byte for byte
+(`objects --workers N` builds the objects in N processes: assets/build_pool.py).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import time
 import zlib
 from pathlib import Path
 
 import numpy as np
 
+from corn_drake.assets.build_pool import in_plan_order
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
 from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
 from corn_drake.assets.manifest import (LibraryObject, Manifest, Rejection, manifest_path,
@@ -24,6 +28,7 @@ from corn_drake.assets.process import ProcessConfig, process_object
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.assets.splits import INGESTED_FAMILY, MEMBER_FRACTION, assign_splits
 from corn_drake.scene.objects import ObjectSpec
+from corn_drake.storage.atomic_files import write_json
 
 
 # Manifest fields load_object_spec reads (ObjectSpec needs all of them to build the scene).
@@ -95,8 +100,27 @@ def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:
                          f"{key} file {path} ({e})") from None
 
 
+# Wall times measured while building (per object and in all), kept out of manifest.json: they
+# differ on every build, and the manifest, like every other file of the library, is the same
+# byte for byte for the same seed and objects, whatever the machine's load or --workers.
+TIMINGS_NAME = "build_timings.json"
+
+
+def _load_timings(out: Path) -> dict:
+    """The timings recorded so far in `out` (a resume adds to them); a fresh record when there
+    is none, or none readable: they are a measurement, not part of the library."""
+    try:
+        data = json.loads((out / TIMINGS_NAME).read_text())
+    except (OSError, ValueError):
+        data = None
+    if not (isinstance(data, dict) and isinstance(data.get("objects"), dict)
+            and isinstance(data.get("build_s"), (int, float))):
+        return {"build_s": 0.0, "objects": {}}
+    return data
+
+
 def _save(out: Path, manifest: Manifest, seed: int,
-          planned: list[LibraryObject] | None = None) -> None:
+          planned: list[LibraryObject] | None = None, timings: dict | None = None) -> None:
     # The split depends on how many members each family has: re-assign it over the whole manifest
     # so a manifest on disk is always split as a complete build with these objects would be.
     # A build of one split only (`planned`: every object the full build would make) takes each
@@ -115,6 +139,8 @@ def _save(out: Path, manifest: Manifest, seed: int,
         rule["split_over_planned"] = len(planned)
     manifest.split_rule = rule
     write_manifest(out, manifest)
+    if timings is not None:
+        write_json(out / TIMINGS_NAME, timings)
 
 
 def planned_procedural(num: int) -> list[LibraryObject]:
@@ -137,64 +163,88 @@ def _no_pose_reason(fields: dict) -> str:
     return "no stable pose found"
 
 
-def _add(out: Path, manifest: Manifest, entry: LibraryObject, rng, mesh, convex, cfg,
-         cache) -> None:
-    """Processes `entry`'s mesh; appends the object, or its rejection, to `manifest`."""
-    _append(manifest, _processed(out, entry, rng, mesh, convex, cfg, cache))
+def _add(out: Path, manifest: Manifest, timings: dict, entry: LibraryObject, rng, mesh, convex,
+         cfg, cache) -> None:
+    """Processes `entry`'s mesh; appends the object, or its rejection, to `manifest`, and its
+    step times to `timings`."""
+    _append(manifest, timings, _processed(out, entry, rng, mesh, convex, cfg, cache))
 
 
-def _append(manifest: Manifest, result: LibraryObject | Rejection) -> None:
+def _append(manifest: Manifest, timings: dict, built: tuple[LibraryObject | Rejection, dict]
+            ) -> None:
+    """Adds one built object (or its rejection) to `manifest` and its step times to `timings`,
+    in the order the caller hands them over (plan order: build_procedural)."""
+    result, steps = built
     (manifest.rejected if isinstance(result, Rejection) else manifest.objects).append(result)
+    if steps:
+        timings["objects"][result.id] = steps
 
 
 def _processed(out: Path, entry: LibraryObject, rng, mesh, convex, cfg,
-               cache) -> LibraryObject | Rejection:
-    """`entry` with its processed mesh's fields (its files written under `out`), or its
-    rejection."""
+               cache) -> tuple[LibraryObject | Rejection, dict]:
+    """(`entry` with its processed mesh's fields (its files written under `out`), or its
+    rejection; the processing's step times, {} for a rejection)."""
     try:
         fields = process_object(mesh, entry.id, out, rng, cfg, convex, cache)
     except Rejected as e:
-        return Rejection(entry.source, str(e))
+        return Rejection(entry.source, str(e)), {}
+    steps = fields.pop("timings")
     if fields["num_stable_poses"] == 0:
-        return Rejection(entry.source, _no_pose_reason(fields))
+        return Rejection(entry.source, _no_pose_reason(fields)), {}
     # Warnings from loading the file (ingest) come first, then those from processing it.
     warnings = entry.warnings + fields["warnings"]
-    return dataclasses.replace(entry, **{**fields, "warnings": warnings})
+    return dataclasses.replace(entry, **{**fields, "warnings": warnings}), steps
+
+
+def _procedural_seed(seed: int, object_id: str) -> int:
+    """The seed of one procedural object's mesh and processing: a function of the library's
+    seed and the object's id only, so any process builds it the same (objects --workers)."""
+    return zlib.crc32(f"{seed}:{object_id}".encode())
+
+
+def _procedural_source(seed: int, planned: LibraryObject) -> str:
+    """The `source` a procedural object (or its rejection) is recorded with."""
+    return f"procedural:{planned.family}:{_procedural_seed(seed, planned.id)}"
 
 
 def _build_planned(out: Path, seed: int, cfg: ProcessConfig,
-                   entry_plan: LibraryObject) -> LibraryObject | Rejection:
-    """One planned procedural object built into `out`: its manifest entry or its rejection. It
-    depends on (seed, its id) only, so any process may build it (objects --workers)."""
+                   entry_plan: LibraryObject) -> tuple[LibraryObject | Rejection, dict]:
+    """One planned procedural object built into `out`: (its manifest entry or its rejection, its
+    step times). It depends on (seed, its id) only, so any process may build it."""
     object_id, family = entry_plan.id, entry_plan.family
-    obj_seed = zlib.crc32(f"{seed}:{object_id}".encode())
+    obj_seed = _procedural_seed(seed, object_id)
     rng = np.random.default_rng(obj_seed)
-    entry = LibraryObject(id=object_id, source=f"procedural:{family}:{obj_seed}", family=family)
+    entry = LibraryObject(id=object_id, source=_procedural_source(seed, entry_plan), family=family)
     try:
         mesh = make_family_mesh(family, obj_seed)
     except ValueError as e:
-        return Rejection(entry.source, str(e))
+        return Rejection(entry.source, str(e)), {}
     return _processed(out, entry, rng, mesh, family in CONVEX_FAMILIES, cfg, out / ".coacd_cache")
 
 
-def _in_plan_order(build, todo: list, workers: int):
-    """build(item) for each item of `todo`, yielded in `todo`'s order (so the manifest lists the
-    objects as a serial build does), in `workers` processes. Spawned, not forked: a fork of a
-    process holding Drake's and torch's threads can deadlock."""
-    if workers <= 1 or len(todo) <= 1:
-        yield from map(build, todo)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+def objects_to_build(planned: list[LibraryObject], manifest: Manifest, seed: int,
+                     wanted: set[str] | None = None) -> list[LibraryObject]:
+    """The planned objects a (resumed) build still has to make, in plan order: those neither in
+    the manifest nor rejected, and only those in `wanted` when given (--split). A rejection
+    names its object's source, not its id, so both are checked: a rejected object is decided,
+    and building it again would only add the same rejection twice. The progress bar's total is
+    this list's length, so its rate and ETA count only the work left."""
+    built = {o.id for o in manifest.objects}
+    rejected = {r.source for r in manifest.rejected}
+    return [o for o in planned
+            if o.id not in built and _procedural_source(seed, o) not in rejected
+            and (wanted is None or o.id in wanted)]
 
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                               mp_context=multiprocessing.get_context("spawn"))
-    try:
-        yield from pool.map(build, todo)
-    finally:
-        # An error or an interrupt: objects not started are dropped; each finished one was
-        # saved as it came, so the same command resumes after the last saved object.
-        pool.shutdown(wait=True, cancel_futures=True)
+
+def _clear_stale_temporaries(out: Path, todo: list[LibraryObject]) -> None:
+    """Removes the temporary files of atomic writes that a stopped build left behind (a worker
+    ended mid-object by build_pool._stop_workers, or a kill -9) from the library folder, the
+    CoACD cache and the folders of the objects about to be built, so a resumed library holds
+    the same files as one built in one go. Only for a folder this build alone writes (the
+    objects command holds its lock)."""
+    for folder in [out, out / ".coacd_cache", *(out / o.id for o in todo)]:
+        for stale in folder.glob(".*.tmp"):
+            stale.unlink(missing_ok=True)
 
 
 def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | None = None,
@@ -223,20 +273,19 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
     # Without `split`, the split is over what was built, as always.
     plan = planned if split is not None else None
     out.mkdir(parents=True, exist_ok=True)
-    manifest = _load_or_new(out)
-    done = {o.id for o in manifest.objects} | {r.source for r in manifest.rejected}
-    todo = [o for o in planned
-            if o.id not in done and (wanted is None or o.id in wanted)]
+    manifest, timings = _load_or_new(out), _load_timings(out)
+    todo = objects_to_build(planned, manifest, seed, wanted)
+    _clear_stale_temporaries(out, todo)
     t0 = time.perf_counter()
     build = functools.partial(_build_planned, out, seed, cfg)
     # The bar counts only the objects still to build, so its rate and ETA hold on a resume or
     # a --split build.
-    for result in tqdm(_in_plan_order(build, todo, workers), total=len(todo),
-                       disable=not progress, desc="objects"):
-        _append(manifest, result)
-        _save(out, manifest, seed, plan)  # after every object: a killed run resumes here
-    manifest.timings["build_s"] = manifest.timings.get("build_s", 0.0) + time.perf_counter() - t0
-    _save(out, manifest, seed, plan)
+    for built in tqdm(in_plan_order(build, todo, workers, name=lambda o: o.id), total=len(todo),
+                      disable=not progress, desc="objects"):
+        _append(manifest, timings, built)
+        _save(out, manifest, seed, plan, timings)  # after every object: a killed run resumes here
+    timings["build_s"] += time.perf_counter() - t0
+    _save(out, manifest, seed, plan, timings)
     return manifest
 
 
@@ -252,7 +301,7 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
         raise InputError(f"mesh folder {source}: no mesh files "
                          f"({', '.join(sorted(SUPPORTED))}) in it")
     out.mkdir(parents=True, exist_ok=True)
-    manifest = _load_or_new(out)
+    manifest, timings = _load_or_new(out), _load_timings(out)
     done = {o.source for o in manifest.objects} | {r.source for r in manifest.rejected}
     for path in tqdm(find_mesh_files(source), disable=not progress, desc="ingest"):
         rel = str(path.relative_to(source))
@@ -264,14 +313,14 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
             mesh, warnings = load_watertight(path)
         except Rejected as e:
             manifest.rejected.append(Rejection(rel, str(e)))
-            _save(out, manifest, seed)
+            _save(out, manifest, seed, timings=timings)
             continue
         object_id = "mesh_" + "".join(c if c.isalnum() else "_" for c in Path(rel).with_suffix("").as_posix())
         entry = LibraryObject(id=object_id, source=rel, family=INGESTED_FAMILY, warnings=warnings)
         convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
         try:
-            _add(out, manifest, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
+            _add(out, manifest, timings, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
         except Exception as e:  # one bad object must not end the run
             manifest.rejected.append(Rejection(rel, f"processing failed: {e}"))
-        _save(out, manifest, seed)
+        _save(out, manifest, seed, timings=timings)
     return manifest

@@ -1,10 +1,12 @@
 """An object library's manifest.json: its typed schema, the one reader and the one writer.
 
 LIBRARY/manifest.json holds {"objects": [LibraryObject...], "rejected": [Rejection...],
-"split_rule": {...}, "timings": {...}}; every path in it is relative to LIBRARY. Every command
-that takes --objects reads it through read_manifest, so a missing or corrupt library is reported
-the same way (an InputError naming the file and, for a bad entry, the object and the field), and
-the library builder writes it through write_manifest.
+"split_rule": {...}}; every path in it is relative to LIBRARY. It records what was built, never
+how long it took (LIBRARY/build_timings.json does), so it is the same byte for byte whenever the
+same objects are built (a library written before keeps its "timings" as fields the schema does
+not name). Every command that takes --objects reads it through read_manifest, so a missing or
+corrupt library is reported the same way (an InputError naming the file and, for a bad entry,
+the object and the field), and the library builder writes it through write_manifest.
 
 Kept apart from assets/library.py so readers (contact data, Ray workers) need not import the
 mesh-processing stack the library builder uses.
@@ -57,7 +59,6 @@ class LibraryObject:
     stable_pose_kept_fraction: float | None = None
     hull_volume_ratio: float | None = None
     coacd_runs: int | None = None
-    timings: dict = dataclasses.field(default_factory=dict)
     # Fields this schema does not name (written by another version): kept and written back.
     extra: dict = dataclasses.field(default_factory=dict)
 
@@ -82,7 +83,6 @@ class Manifest:
     objects: list[LibraryObject] = dataclasses.field(default_factory=list)
     rejected: list[Rejection] = dataclasses.field(default_factory=list)
     split_rule: dict | None = None  # the seed and rule the splits were assigned with
-    timings: dict = dataclasses.field(default_factory=dict)
     extra: dict = dataclasses.field(default_factory=dict)
 
     def ids(self, split: str | None = None) -> list[str]:
@@ -166,7 +166,7 @@ def _to_json(record) -> dict:
 
 def manifest_to_json(manifest: Manifest) -> dict:
     data = {"objects": [_to_json(o) for o in manifest.objects],
-            "rejected": [_to_json(r) for r in manifest.rejected], "timings": manifest.timings}
+            "rejected": [_to_json(r) for r in manifest.rejected]}
     if manifest.split_rule is not None:
         data["split_rule"] = manifest.split_rule
     return {**data, **manifest.extra}

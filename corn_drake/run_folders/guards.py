@@ -46,6 +46,7 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
         fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as e:
         raise InputError(f"{folder}: cannot write there ({e.strerror or e})") from e
+    held = False
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -53,6 +54,7 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
             raise InputError(f"{folder} is in use by another corn-drake process (pid {holder}); "
                              "wait for it to end or write to another folder") from None
+        held = True
         # The holder's pid, for the message above (the lock itself is the flock, not this text).
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
@@ -61,6 +63,11 @@ def lock_folder(folder: str | os.PathLike) -> Iterator[Path]:
         _undo_bookkeeping(folder, existed, before, made_parents)
         raise
     finally:
+        if held:
+            # The pid means something only while the lock is held: emptied on release, a
+            # finished folder's files depend on what was made, not on which process made it
+            # (two builds of a library are the same byte for byte, .lock included).
+            os.ftruncate(fd, 0)
         os.close(fd)  # closing the only descriptor releases the flock
 
 
