@@ -53,6 +53,8 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
                              if p.is_file() and p.name != "card.json"}
     library = library_arguments(card["library_command"])
     assert int(library.get("--seed", 0)) == card["library_seed"]
+    # The hull budget is named, so a change of `objects`' default cannot change the card's objects.
+    assert "--max-hulls" in library, card["library_command"]
     # The library the report was measured on: every object it evaluated, and one hash over them.
     from corn_drake.assets.content_hash import combined_hash
 

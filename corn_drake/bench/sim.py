@@ -8,6 +8,9 @@ trajectories — same contacts, same solver work — and `replay_max_position_er
 closely. The overhead ratio is bare steps/s over env steps/s; a cProfile of the env run says
 where the time goes.
 
+With --objects LIB [LIB ...], the bare-physics rate of every object of the libraries instead
+(bench/library_physics.py: what a hull budget costs or saves).
+
 With --policy KIND, the policy network (and its encoder) is in the loop: a batch of envs in this
 process with batched inference, against the same number of envs on Ray rollout workers
 (`ray_policy_steps_per_s`, `ray_ratio` = Ray / in-process).
@@ -23,7 +26,7 @@ import time
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
-from corn_drake.errors import InputError
+from corn_drake.bench.bare_physics import check_replayable, record_torques, replay_bare
 from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 PREVIOUS_PHYSICS = DIAGRAMS_DIR / "physics" / "previous_default.yaml"
@@ -54,95 +57,16 @@ def add_arguments(parser):
                         help="teacher-diagram overlay with the contact settings to compare the "
                              "configured physics against (physics_speedup): by default the "
                              "settings before the throughput work")
+    parser.add_argument("--objects", nargs="+", default=None, metavar="LIBRARY",
+                        help="bare-physics steps/s of every "
+                             "object of these libraries (two or more: the same objects, e.g. "
+                             "built with another --max-hulls, alternating; ratios to the first; default: none, the env measurement)")
+    parser.add_argument("--objects-split", default="unseen", choices=("train", "unseen", "all"),
+                        help="with --objects: which of the libraries' objects (default: unseen)")
     add_renamed(parser, "--config", "--task", " (a task name or a teacher-diagram YAML, as "
                 "`train --task`)")
     add_renamed(parser, "--envs", "--envs-per-worker", " (as in `train`; the in-process run "
                 "steps --workers x --envs-per-worker envs)")
-
-
-def _record(env, plans):
-    """Untimed pass: per episode the DR sample, initial state and per-physics-step torques."""
-    import numpy as np
-
-    clock, h = env.clock, env.clock.time_step
-    ctrl = env.handles.controller
-    recorded = []
-    for seed, actions in plans:
-        env.reset(seed=seed)
-        x0 = env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()
-        ctrl_ctx = ctrl.GetMyContextFromRoot(env.context)
-        torques = []
-        for k, action in enumerate(actions):
-            env._action_port.FixValue(env.context, action)
-            for j in range(1, clock.substeps + 1):
-                # AdvanceTo(m h) stops right before the plant update at m h (events at the end
-                # time run at the start of the next call): the controller's output now is the
-                # torque that update uses.
-                env.simulator.AdvanceTo((k * clock.substeps + j) * h)
-                torques.append(np.array(ctrl.GetOutputPort("actuation").Eval(ctrl_ctx)))
-            env.simulator.AdvanceTo(clock.boundary(k + 1))
-        recorded.append((env.episode.physics, x0, np.array(torques),
-                         env.scene.plant.GetPositionsAndVelocities(env.plant_context).copy()))
-    return recorded
-
-
-def _run_bare(env, recorded):
-    import numpy as np
-
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
-
-    from corn_drake.scene.builder import build_scene
-    from corn_drake.scene.randomization import apply_physics
-
-    clock = env.clock
-    builder = DiagramBuilder()
-    scene = build_scene(builder, env.cfg.scene, env.scene.object_spec)
-    dummy = PiecewisePolynomial.ZeroOrderHold([0.0, 1.0], np.zeros((7, 2)))
-    source = builder.AddSystem(TrajectorySource(dummy))
-    builder.Connect(source.get_output_port(), scene.plant.get_actuation_input_port(scene.panda))
-    diagram = builder.Build()
-    sim = Simulator(diagram)
-    ctx = sim.get_mutable_context()
-    default = diagram.CreateDefaultContext()
-    plant_ctx = scene.plant.GetMyMutableContextFromRoot(ctx)
-    elapsed, finals = 0.0, []
-    for sample, x0, torques, _ in recorded:
-        # Torque m is used by the plant update at time (m + 1) h.
-        times = clock.time_step * np.arange(1, len(torques) + 2)
-        source.UpdateTrajectory(PiecewisePolynomial.ZeroOrderHold(
-            times, np.vstack([torques, torques[-1:]]).T))
-        ctx.SetTimeStateAndParametersFrom(default)
-        ctx.SetTime(clock.boundary(0))
-        apply_physics(scene, sample, ctx, 1.0)
-        scene.plant.SetPositionsAndVelocities(plant_ctx, x0)
-        sim.Initialize()
-        n_policy = len(torques) // clock.substeps
-        t0 = time.perf_counter()
-        for k in range(n_policy):  # same AdvanceTo pattern as the env: one call per policy step
-            sim.AdvanceTo(clock.boundary(k + 1))
-        elapsed += time.perf_counter() - t0
-        finals.append(scene.plant.GetPositionsAndVelocities(plant_ctx).copy())
-    return elapsed, finals
-
-
-def check_replayable(cfg) -> None:
-    """The bare replay rebuilds the scene with the env's object as built: refuses a config whose
-    episodes rescale the object (their torques would be replayed on the wrong size)."""
-    if cfg.randomization.object_radius is not None:
-        raise InputError("the bare-physics replay needs a fixed-size object: set "
-                         "randomization.object_radius to null (no size randomization)")
-
-
-def bare_physics_rate(env, steps: int, seed: int) -> float:
-    """Policy steps/s of the bare plant of `env`'s scene, replaying the torques of `steps`
-    random-action policy steps recorded on `env` (untimed) from the same initial states."""
-    from corn_drake.bench.episode_plans import random_action_plans
-
-    elapsed, _ = _run_bare(env, _record(env, random_action_plans(env, steps, seed)))
-    return steps / elapsed
 
 
 def _profile_env(env, plans) -> list[str]:
@@ -217,12 +141,12 @@ def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -
 
     baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
     plans = random_action_plans(env, steps, seed)
-    recorded = {"configured": (env, _record(env, plans)),
-                "baseline": (baseline, _record(baseline, plans))}
+    recorded = {"configured": (env, record_torques(env, plans)),
+                "baseline": (baseline, record_torques(baseline, plans))}
     rates = {name: 0.0 for name in recorded}
     for _ in range(repeats):
         for name, (e, rec) in recorded.items():
-            rates[name] = max(rates[name], steps / _run_bare(e, rec)[0])
+            rates[name] = max(rates[name], steps / replay_bare(e, rec)[0])
     return {"physics_speedup": rates["configured"] / rates["baseline"],
             "configured_bare_physics_policy_steps_per_s": rates["configured"],
             "baseline_bare_physics_policy_steps_per_s": rates["baseline"],
@@ -245,12 +169,19 @@ def run(args) -> dict:
     from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.rl.env import TeacherEnv
 
+    if args.objects:
+        from corn_drake.bench.library_physics import measure_libraries
+        from corn_drake.config.diagram_files import load_teacher_config
+
+        cfg = load_teacher_config(args.task)
+        return measure_libraries(cfg, args.objects, None if args.objects_split == "all"
+                                 else args.objects_split, args.steps, args.seed, args.repeats)
     env = TeacherEnv(args.task)
     check_replayable(env.cfg)
     base_cfg = baseline_physics_config(env.cfg, args.baseline_physics)  # its errors come first
     run_plans(env, random_action_plans(env, 20, args.seed + 1))  # warm-up
     plans = random_action_plans(env, args.steps, args.seed)
-    recorded = _record(env, plans)
+    recorded = record_torques(env, plans)
     # Env and bare runs alternate and each keeps its fastest repeat: on these machines one run
     # swung +-30 % against the next with nothing else running, and a drift between two single
     # runs went straight into the ratio.
@@ -258,7 +189,7 @@ def run(args) -> dict:
     for _ in range(args.repeats):
         elapsed, env_finals = run_plans(env, plans)
         env_time = min(env_time, elapsed)
-        elapsed, bare_finals = _run_bare(env, recorded)
+        elapsed, bare_finals = replay_bare(env, recorded)
         bare_time = min(bare_time, elapsed)
     nq = env.scene.plant.num_positions()
     replay_error = max(float(np.abs(b[:nq] - e[:nq]).max()) for b, e in zip(bare_finals, env_finals))

@@ -2,7 +2,7 @@
 
 The trainer (corn_drake/rl/trainer.py, in-process envs, the push task by default, a randomly
 initialised encoder) runs a few updates; then the bare plant of the same scene is driven by
-recorded torques exactly as `bench sim` does it (bench/sim.py bare_physics_rate), on one of the
+recorded torques exactly as `bench sim` does it (bench/bare_physics.py bare_physics_rate), on one of the
 trainer's own envs. `train_ratio` = train / bare is the fraction of the physics-only speed that
 training keeps (issue 14 asks >= 0.8).
 
@@ -90,7 +90,7 @@ def run(args) -> dict:
     import torch
 
     from corn_drake.bench.phases import PhaseTimer
-    from corn_drake.bench.sim import bare_physics_rate, check_replayable
+    from corn_drake.bench.bare_physics import bare_physics_rate, check_replayable
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
     from corn_drake.nn.threads import torch_threads, usable_cpus

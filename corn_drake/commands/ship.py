@@ -75,6 +75,27 @@ def library_arguments(command: str) -> dict[str, str]:
     return values
 
 
+def with_hull_budget(command: str, library: dict[str, str]) -> str:
+    """`command` (a library command, parsed as `library`) naming its hull budget: the card's
+    command must rebuild exactly its objects whatever `objects`' default becomes, so a command
+    without --max-hulls gets the one its library was built with (its arguments.json; libraries
+    recorded before the flag existed were built with 16). A command naming another budget than
+    its library's is an InputError."""
+    from corn_drake.commands.objects import UNRECORDED_MAX_HULLS
+    from corn_drake.errors import InputError
+    from corn_drake.run_folders.guards import read_recorded_arguments
+
+    recorded = (read_recorded_arguments(library["--out"]) or {}).get("--max-hulls",
+                                                                      UNRECORDED_MAX_HULLS)
+    named = library.get("--max-hulls")
+    if named is None:
+        return f"{command} --max-hulls {recorded}"
+    if str(named) != str(recorded):
+        raise InputError(f"--library-command names --max-hulls {named}, but "
+                         f"{library['--out']} was built with {recorded}")
+    return command
+
+
 def _check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
     from corn_drake.errors import InputError
 
@@ -106,6 +127,7 @@ def run(args) -> int:
     report = read_json(args.report, "--report")
     _check_report(report, (args.run, args.out), args.report)
     library = library_arguments(args.library_command)
+    library_command = with_hull_budget(args.library_command, library)
     kind = run_kind(args.run)
     if kind == "distill" and "perception" not in report:
         raise InputError(f"--report {args.report} records no perception chain; a student's card "
@@ -121,7 +143,7 @@ def run(args) -> int:
             "success_rate": report["success_rate"],
             "balanced_success_rate": report.get("balanced_success_rate"),
             "episodes": len(report["episodes"]), "split": "unseen",
-            "report": args.report, "library_command": args.library_command,
+            "report": args.report, "library_command": library_command,
             "library_seed": int(library.get("--seed", 0)),
             "evaluate_command": (f"corn-drake evaluate --run {out.as_posix()} --objects "
                                  f"{library['--out']} --split unseen --episodes "
