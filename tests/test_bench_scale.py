@@ -59,14 +59,24 @@ def test_scale_report_with_real_ray_workers_and_no_process_left(tmp_path):
         assert set(fractions) == set(scale.FRACTION_KEYS)
         assert all(v > 0 for v in fractions.values()), fractions  # every timer was reached
         assert abs(sum(fractions.values()) - 1) < 1e-9
-        assert math.isclose(run["learner_share"], 1 - fractions["env_step_wait"], rel_tol=1e-9)
+        assert math.isclose(run["learner_share"], 1 - fractions["rollout_wait"], rel_tol=1e-9)
+        # The workers' own pace: their envs x steps over their own collect() seconds, which
+        # lie inside the learner's wait for them.
+        assert 0 < run["worker_inference_share"] < 1
+        # The slowest worker's own collection lies inside the learner's wait for it.
+        assert 0 < run["slowest_collection_s_per_update"] <= run["rollout_wait_s_per_update"]
+        assert run["env_steps_per_s_per_worker"] >= ENVS_PER_WORKER * ROLLOUT * UPDATES / \
+            run["time_s"]["rollout_wait"] * (1 - 1e-9)
         # The trainer's own per-update timer covers the same interval (plus the normaliser).
         # Within a factor of 3, not a close tolerance: the part only one timer covers can be
         # stretched by load from other processes; a rate from the wrong interval or the wrong
         # step count is off by far more.
         assert run["steps_per_s"] / 3 < run["trainer_logged_steps_per_s"] < 3 * run["steps_per_s"]
         assert run["worker_restarts"] == 0
-    assert results["in_process_env_steps_per_s"] > 0
+    local = results["in_process_run"]
+    assert local["workers"] == 0 and local["worker_restarts"] == 0
+    assert results["in_process_env_steps_per_s"] == local["env_steps_per_s_per_worker"] > 0
+    assert results["ray_1_worker_vs_in_process"] == rates[0] / local["steps_per_s"]
     assert results["worker_pace_ratio"] == [r["env_steps_per_s_per_worker"] /
                                             results["in_process_env_steps_per_s"]
                                             for r in results["runs"]]
@@ -82,8 +92,8 @@ def test_scale_report_with_real_ray_workers_and_no_process_left(tmp_path):
 def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch):
     """The report's assembly, on made-up rates (no Ray): 1 is measured first even when not
     asked for, and efficiency is each count's rate per worker over the 1-worker rate."""
-    rates = {1: 100.0, 2: 180.0, 4: 300.0}
-    paces = {1: 85.0, 2: 80.0, 4: 70.0}  # each worker's env steps/s while stepping
+    rates = {0: 110.0, 1: 100.0, 2: 180.0, 4: 300.0}  # 0: the envs in this process
+    paces = {0: 100.0, 1: 85.0, 2: 80.0, 4: 70.0}  # each collector's env steps/s while stepping
     measured = []
 
     def fake_measure(args, env_cfg, workers):
@@ -92,11 +102,10 @@ def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch)
                 "env_steps_per_s_per_worker": paces[workers]}
 
     monkeypatch.setattr(scale, "measure", fake_measure)
-    monkeypatch.setattr(scale, "in_process_env_steps_per_s", lambda *a, **k: 100.0)
     path = tmp_path / "scale.json"
     assert main(["bench", "scale", "--report", str(path), "--workers", "4,2"]) == 0
     results = json.loads(path.read_text())["results"]
-    assert measured == [1, 2, 4] and results["workers"] == [1, 2, 4]
+    assert measured == [0, 1, 2, 4] and results["workers"] == [1, 2, 4]
     assert results["efficiency"] == [1.0, 0.9, 0.75]
     assert results["steps_per_s"] == [100.0, 180.0, 300.0]
     assert results["baseline_added"] and results["requested_workers"] == [4, 2]
@@ -104,6 +113,7 @@ def test_worker_counts_are_sorted_with_the_baseline_added(tmp_path, monkeypatch)
     # Each worker's pace against the in-process pace of the same envs, in worker-count order.
     assert results["worker_pace_ratio"] == [0.85, 0.8, 0.7]
     assert results["in_process_env_steps_per_s"] == 100.0
+    assert results["ray_1_worker_vs_in_process"] == 100.0 / 110.0
 
 
 def test_oversubscribed_counts_are_warned_about():

@@ -19,6 +19,7 @@ from corn_drake.contract import ACTION_DIM, observation_shapes
 from corn_drake.nn.encoder_files import make_policy_encoder
 from corn_drake.rl.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
 from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.segments import SegmentCollector
 from corn_drake.rl.trainer import Trainer
 from corn_drake.rl.vec_env import StepResult
 
@@ -57,7 +58,8 @@ class RandomEnvs:
 def _train(kind, tmp_path, monkeypatch, updates=2, rollout_steps=4, num_envs=2):
     """Trains `updates` updates; returns (encoder calls per collection, per PPO update,
     history, encoder parameters before, trained encoder)."""
-    monkeypatch.setattr(Trainer, "_make_envs", lambda self, n: RandomEnvs(n))
+    monkeypatch.setattr(Trainer, "_make_rollouts",
+                        lambda self, n: SegmentCollector(RandomEnvs(n), self.agent, self.device))
     cfg = TrainConfig(policy=kind, total_steps=updates * rollout_steps * num_envs,
                       envs_per_worker=num_envs, rollout_steps=rollout_steps, checkpoint_every=100)
     cfg.ppo.epochs, cfg.ppo.minibatches = 3, 2

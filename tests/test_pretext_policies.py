@@ -22,6 +22,7 @@ from corn_drake.pretraining.pretext import PretextPretrainer
 from corn_drake.rl.agent import TeacherAgent
 from corn_drake.rl.checkpoints import load_run
 from corn_drake.rl.pretrained_encoders import MIN_PRETEXT_SKILL, load_encoder
+from corn_drake.rl.segments import SegmentCollector
 from corn_drake.rl.trainer import Trainer
 from corn_drake.run_folders.config_file import write_run_config
 from tests.fixtures import write_tiny_library
@@ -62,7 +63,8 @@ def test_the_policy_builds_acts_trains_and_loads_from_its_run_checkpoint(
     action = agent.act(_observation())
     assert action.shape == (ACTION_DIM,) and np.all(np.abs(action) <= 1)
 
-    monkeypatch.setattr(Trainer, "_make_envs", lambda self, n: RandomEnvs(n))
+    monkeypatch.setattr(Trainer, "_make_rollouts",
+                        lambda self, n: SegmentCollector(RandomEnvs(n), self.agent, self.device))
     cfg = TrainConfig(policy=kind, encoder=str(pretrained[kind]), allow_weak_encoder=True,
                       total_steps=16, envs_per_worker=2, rollout_steps=8, checkpoint_every=100)
     before = {k: v.clone() for k, v in encoder.state_dict().items()}

@@ -148,16 +148,16 @@ def test_frozen_encoder_runs_once_per_observation_batch_and_never_in_the_update(
     encoder, calls = make_encoder("corn"), []
     encoder.register_forward_pre_hook(lambda module, args: calls.append(1))  # counts, changes nothing
     trainer = Trainer(cfg, tmp_path, encoder)
-    buf, last_values, _, _, _ = trainer._collect(trainer.envs.reset())
-    ended = torch.stack([a.bool() | b.bool() for a, b in zip(buf["terminated"], buf["truncated"])])
+    rollout = trainer._collect()
+    stack, flat_obs = rollout.stack, rollout.obs
+    ended = stack["terminated"].bool() | stack["truncated"].bool()
     assert ended.any(dim=1).sum() >= 1
     # One call per rollout step, one per step where episodes ended (their final observations),
     # one for the value after the rollout.
     assert len(calls) == cfg.rollout_steps + int(ended.any(dim=1).sum()) + 1
-    stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
     adv, ret = compute_gae(stack["rewards"], stack["values"], stack["terminated"],
-                           stack["truncated"], stack["final_values"], last_values, 0.99, 0.95)
-    flat_obs = {k: torch.cat([o[k] for o in buf["obs"]]) for k in buf["obs"][0]}
+                           stack["truncated"], stack["final_values"], rollout.last_values,
+                           0.99, 0.95)
     calls.clear()
     stats = trainer.ppo.update(flat_obs, stack["actions"].flatten(0, 1), stack["logp"].flatten(0, 1),
                                adv.flatten(), ret.flatten())
@@ -257,18 +257,19 @@ def test_a_failed_simulation_step_ends_the_episode_without_bootstrap(tmp_path):
     from corn_drake.rl.ppo import compute_gae
 
     trainer = Trainer(_small_cfg(64), tmp_path)
-    obs = trainer.envs.reset()
+    trainer.rollouts.reset()
     env = trainer.envs.envs[0]
     # A huge object velocity makes the next step fail (the solver or a non-finite state).
     n_v = env.scene.plant.num_velocities(env.scene.object_instance)
     env.scene.plant.SetVelocities(env.plant_context, env.scene.object_instance, np.full(n_v, 1e300))
-    buf, last_values, _, episodes, sim_errors = trainer._collect(obs)
-    assert sim_errors == 1
+    rollout = trainer._collect()
+    episodes, stack = rollout.episodes, rollout.stack
+    assert rollout.sim_errors == 1
     assert [e["sim_error"] for e in episodes] == [True] and episodes[0]["length"] == 1
-    assert buf["terminated"][0].tolist() == [1.0, 0.0] and buf["truncated"][0].tolist() == [0.0, 0.0]
-    stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
+    assert stack["terminated"][0].tolist() == [1.0, 0.0]
+    assert stack["truncated"][0].tolist() == [0.0, 0.0]
     adv, _ = compute_gae(stack["rewards"], stack["values"], stack["terminated"], stack["truncated"],
-                         stack["final_values"], last_values, 0.99, 0.95)
+                         stack["final_values"], rollout.last_values, 0.99, 0.95)
     # Ended, not cut: the advantage is the reward minus the value, nothing bootstrapped after.
     torch.testing.assert_close(adv[0, 0], stack["rewards"][0, 0] - stack["values"][0, 0])
 

@@ -1,27 +1,33 @@
 """`corn-drake bench scale`: training steps/s of the Ray path at each worker count, and efficiency.
 
 For each worker count W the real trainer (corn_drake/rl/trainer.py) trains with W Ray rollout
-workers of --envs-per-worker envs each (weak scaling: the batch grows with W), the learner's
-batched inference and PPO update in the loop, a randomly initialised encoder (timing only), on
---device. Rates are measured on the timed updates only (bench/timed_training.py).
-efficiency(W) = (steps/s at W / W) / (steps/s at 1 worker): 1.0 is perfect scale-out (issue 14
-asks >= 0.75 at 8 workers on a 16-core machine). The 1-worker run is the baseline, measured
-even when --workers leaves it out (the report then says `baseline_added`).
+workers of --envs-per-worker envs each (weak scaling: the batch grows with W), each worker
+stepping its own envs for the whole rollout segment with a CPU copy of the policy
+(rl/segment_workers.py), the learner's PPO update on --device, a randomly initialised encoder
+(timing only). Rates are measured on the timed updates only (bench/timed_training.py).
+efficiency(W) = (steps/s at W / W) / (steps/s at 1 worker): 1.0 is perfect scale-out. The
+1-worker run is the baseline, measured even when --workers leaves it out (the report then says
+`baseline_added`). The same envs are also trained in this process (`train --workers 0`) in the
+same run: `in_process_steps_per_s`, and `ray_1_worker_vs_in_process` = the 1-worker rate over
+it (what moving the envs into a worker costs end to end).
 
-Why a run does not scale shows in the learner's share of its time. The trainer steps all
-workers in lock step: the learner sends actions, waits for every worker's step, then runs
-inference for all envs, and the workers idle while it does that and the PPO update. Per run:
-  env_step_wait     RayEnvBatch.step: dispatch, the slowest worker's step, transfer, stacking;
-  policy_inference  the rest of the rollout: observation tensors, encoder and action sampling
-                    for all envs at once, value bootstraps, the reward scaler, buffers;
-  ppo_update        PPO.update;
-  other             the rest of the update (stacking the rollout, GAE).
-learner_share = 1 - env_step_wait share. env_steps_per_s_per_worker (steps / env_step_wait / W)
-is the workers' own pace while stepping: flat across W with falling efficiency means the learner
-limits; falling too means the workers contend for cores (or memory bandwidth).
-worker_pace_ratio = that pace / the pace of the same --envs-per-worker envs stepped in this
-process with random actions (in_process_env_steps_per_s, measured in the same run): what the
-lock-step round trips cost a worker.
+Where each run's time goes (the learner's wall time per update, fractions adding up to 1):
+  rollout_wait     the collectors' collect(): dispatch, the slowest worker's segment (its
+                   inference and env steps), the transfer back (in-process: the collection);
+  learner_rollout  the rest of the rollout on the learner: the update's noise draws, the weight
+                   broadcast, the reward scaler, the rollout tensors;
+  ppo_update       PPO.update;
+  other            the rest of the update (GAE).
+learner_share = 1 - rollout_wait share: the time the workers idle waiting for the learner (PPO
+stays on-policy: a segment needs the weights of the update before it).
+env_steps_per_s_per_worker is each worker's own pace while it collects (its envs x steps / its
+collect() seconds, inference included; mean over workers and timed updates), and
+worker_pace_ratio = that pace / the pace of the same envs collected by the same policy in this
+process (in_process_env_steps_per_s, the in-process run's collector): what being a Ray worker
+costs a worker (1.0: nothing). worker_inference_share is the part of a worker's collect() its
+policy's forward passes take. rollout_wait_s_per_update against slowest_collection_s_per_update
+splits the learner's wait into the slowest worker's own collection and the rest (dispatch,
+transfer, unpacking).
 
 Each run starts its own local Ray and shuts it down after (rl/ray_workers.init_ray ends what
 Ray leaves behind), unless Ray was already running in this process: then that one is used.
@@ -37,8 +43,9 @@ from corn_drake.arguments.value_types import positive_int, positive_int_list
 NAME = "scale"
 HELP = "training steps/s with 1, 2, 4, ... Ray rollout workers, and the efficiency per worker"
 
-ENV_STEP_WAIT = "env_step_wait"
-FRACTION_KEYS = (ENV_STEP_WAIT, "policy_inference", "ppo_update", "other")
+ROLLOUT_WAIT = "rollout_wait"
+LEARNER_ROLLOUT = "learner_rollout"
+FRACTION_KEYS = (ROLLOUT_WAIT, LEARNER_ROLLOUT, "ppo_update", "other")
 
 
 def worker_counts(text: str) -> list[int]:
@@ -64,9 +71,19 @@ def add_arguments(parser):
                              "update): cpu, cuda or cuda:N; the envs run on the CPU")
 
 
-def instrument_ray(trainer, timer) -> None:
-    """Times the learner's wait on the workers: RayEnvBatch.step of this trainer only."""
-    timer.wrap(trainer.envs, "step", ENV_STEP_WAIT)
+def instrument_rollouts(trainer, timer, segments: list) -> None:
+    """Times the learner's wait on this trainer's collectors (their collect()) and keeps the
+    segments of the timed updates (the workers' own seconds are in them)."""
+    original = trainer.rollouts.collect
+
+    def collect(noise):
+        with timer.phase(ROLLOUT_WAIT):
+            segment = original(noise)
+        if timer.in_window:
+            segments.append(segment)
+        return segment
+
+    trainer.rollouts.collect = collect
 
 
 class _RaySession:
@@ -87,34 +104,58 @@ class _RaySession:
         return False
 
 
+def slowest_collection_s(segments: list) -> float:
+    """Mean over the timed updates of the slowest collector's own collect() seconds: the part
+    of the learner's wait the workers' pace explains (the rest: dispatch, transfer, unpacking)."""
+    import numpy as np
+
+    return float(np.mean([max(p["total"] for p in segment.parts) for segment in segments]))
+
+
+def worker_paces(segments: list, rollout_steps: int) -> tuple[float, float]:
+    """(mean env steps/s of a collector while it collects, mean share of its collect() in
+    inference) over every collector of every segment."""
+    import numpy as np
+
+    parts = [p for segment in segments for p in segment.parts]
+    return (float(np.mean([p["envs"] * rollout_steps / p["total"] for p in parts])),
+            float(np.mean([p["inference"] / p["total"] for p in parts])))
+
+
 def measure(args, env_cfg, workers: int) -> dict:
-    """One run with `workers` Ray workers: its rate and where the learner's time goes."""
+    """One run with `workers` Ray workers (0: the envs in this process): its rate and where the
+    learner's time goes."""
     from corn_drake.bench.phases import PhaseTimer
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
 
     cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device)
-    timer = PhaseTimer()
+    timer, segments = PhaseTimer(), []
     with _RaySession():
         trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
-                                       instrument=lambda t: instrument_ray(t, timer))
-        restarts = trainer.envs.restarts
+                                       instrument=lambda t: instrument_rollouts(t, timer,
+                                                                                segments))
+        restarts = getattr(trainer.rollouts, "restarts", 0)
         del trainer  # its actors go with the session
-    check_counts(timer, {timer.WINDOW: args.updates,
-                         ENV_STEP_WAIT: args.updates * args.rollout_steps})
-    per_update = workers * args.envs_per_worker * args.rollout_steps
+    check_counts(timer, {timer.WINDOW: args.updates, ROLLOUT_WAIT: args.updates})
+    per_update = max(workers, 1) * args.envs_per_worker * args.rollout_steps
     steps = per_update * args.updates
     s, total = timer.seconds, timer.window_seconds
-    seconds = {ENV_STEP_WAIT: s[ENV_STEP_WAIT], "policy_inference": s[COLLECT],
+    seconds = {ROLLOUT_WAIT: s[ROLLOUT_WAIT], LEARNER_ROLLOUT: s[COLLECT],
                "ppo_update": s[PPO_UPDATE], "other": s[timer.WINDOW]}
     history = metrics["history"][args.warmup_updates:]  # the timed updates
+    pace, inference_share = worker_paces(segments, args.rollout_steps)
     return {
         "workers": workers,
-        "envs": workers * args.envs_per_worker,
+        "envs": max(workers, 1) * args.envs_per_worker,
         "steps": steps,
         "steps_per_s": steps / total,
-        "learner_share": 1.0 - seconds[ENV_STEP_WAIT] / total,
-        "env_steps_per_s_per_worker": steps / seconds[ENV_STEP_WAIT] / workers,
+        "learner_share": 1.0 - seconds[ROLLOUT_WAIT] / total,
+        "env_steps_per_s_per_worker": pace,
+        "worker_inference_share": inference_share,
+        # Per update: the learner's wait for the segments, and the slowest collector's own time.
+        "rollout_wait_s_per_update": seconds[ROLLOUT_WAIT] / args.updates,
+        "slowest_collection_s_per_update": slowest_collection_s(segments),
         "time_fractions": {k: v / total for k, v in seconds.items()},
         "time_s": {**seconds, "total": total},
         "trainer_logged_steps_per_s": trainer_logged_steps_per_s(history, per_update),
@@ -122,27 +163,6 @@ def measure(args, env_cfg, workers: int) -> dict:
         "sim_errors": sum(r["sim_errors"] for r in history),
         "worker_restarts": restarts,
     }
-
-
-def in_process_env_steps_per_s(env_cfg, envs: int, steps: int, seed: int = 0) -> float:
-    """Env steps/s (steps x envs) of `envs` envs stepped in this process with random actions:
-    the pace a worker's envs have with nothing between their steps, the baseline of
-    worker_pace_ratio."""
-    import time
-
-    import numpy as np
-
-    from corn_drake.contract import ACTION_DIM
-    from corn_drake.rl.vec_env import EnvBatch, EnvFactory
-
-    batch = EnvBatch(EnvFactory(env_cfg, seed=seed), envs)
-    rng = np.random.default_rng(seed)
-    batch.reset()
-    batch.step(rng.uniform(-1, 1, (envs, ACTION_DIM)))  # warm-up: first-step caches
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        batch.step(rng.uniform(-1, 1, (envs, ACTION_DIM)))
-    return steps * envs / (time.perf_counter() - t0)
 
 
 def oversubscription_warnings(counts: list[int], usable_cpus: int) -> list[str]:
@@ -183,19 +203,22 @@ def run(args) -> dict:
     runs = []
     with torch_threads(args.torch_threads):
         threads_used = torch.get_num_threads()
+        # The same envs trained in this process: the baseline of the workers' pace and of the
+        # 1-worker run's end-to-end rate.
+        local = measure(args, env_cfg, 0)
+        print(f"  in process: {local['steps_per_s']:.0f} steps/s", flush=True)
         for workers in counts:
             runs.append(measure(args, env_cfg, workers))
             print(f"  {workers} workers: {runs[-1]['steps_per_s']:.0f} steps/s, learner share "
-                  f"{runs[-1]['learner_share']:.2f}", flush=True)
-        # The same envs stepped in this process, as many steps as a worker takes per run.
-        in_process = in_process_env_steps_per_s(env_cfg, args.envs_per_worker,
-                                                args.updates * args.rollout_steps)
+                  f"{runs[-1]['learner_share']:.2f}, worker pace "
+                  f"{runs[-1]['env_steps_per_s_per_worker']:.0f} env steps/s", flush=True)
+    in_process = local["env_steps_per_s_per_worker"]
     baseline = runs[0]["steps_per_s"]
     efficiency = [r["steps_per_s"] / r["workers"] / baseline for r in runs]
     for r, e in zip(runs, efficiency):
         r["efficiency"] = e
-    # Each worker's own pace while stepping against the in-process pace of the same envs: what
-    # the round trips and the lock step cost a worker (1.0: nothing).
+    # Each worker's own pace while collecting against the in-process collection of the same envs
+    # and policy: what being a Ray worker costs a worker (1.0: nothing).
     pace = [r["env_steps_per_s_per_worker"] / in_process for r in runs]
     return {
         "workers": counts,
@@ -204,6 +227,9 @@ def run(args) -> dict:
         "learner_share": [r["learner_share"] for r in runs],
         "worker_pace_ratio": pace,
         "in_process_env_steps_per_s": in_process,
+        "in_process_steps_per_s": local["steps_per_s"],
+        "ray_1_worker_vs_in_process": baseline / local["steps_per_s"],
+        "in_process_run": local,
         "baseline_steps_per_s": baseline,
         "requested_workers": args.workers,
         # True when --workers left out 1: its run was added as the baseline.

@@ -214,8 +214,17 @@ def sample_actions(policy: Callable, obs: Obs, generator: torch.Generator | None
     """(actions, log_prob, value) from the current policy, without gradients."""
     with torch.no_grad():
         mu, value = policy(obs)
-        std = policy.log_std.exp()
-        # The noise comes from the CPU generator whatever the device: a run draws the same
-        # stream on cpu and cuda, and its checkpoint holds that generator's state.
-        actions = mu + std * torch.randn(mu.shape, generator=generator).to(mu.device)
+    # The noise comes from the CPU generator whatever the device: a run draws the same
+    # stream on cpu and cuda, and its checkpoint holds that generator's state.
+    return actions_from_noise(policy, obs, torch.randn(mu.shape, generator=generator),
+                              (mu, value))
+
+
+def actions_from_noise(policy: Callable, obs: Obs, noise: torch.Tensor, forward=None):
+    """(actions, log_prob, value) without gradients: mean + exp(log_std) * `noise` (unit
+    Gaussian draws shaped like the actions, on any device). `forward`: policy(obs) if already
+    computed. The learner draws the noise, so envs stepped anywhere act with the same draws."""
+    with torch.no_grad():
+        mu, value = policy(obs) if forward is None else forward
+        actions = mu + policy.log_std.exp() * noise.to(mu.device, mu.dtype)
         return actions, gaussian_log_prob(mu, policy.log_std, actions), value

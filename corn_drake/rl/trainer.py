@@ -7,13 +7,21 @@ optimizer, normalisers and RNG state (environments start fresh episodes, continu
 over the library's train objects). metrics.json's episodes_per_object counts the finished
 training episodes of each object over the whole run.
 
-`cfg.device` holds the agent, batched inference, the rollout buffers and the PPO update; the
-envs step numpy arrays on the CPU, and the reward scaler and random generators stay there too
-(the same random streams on any device). Checkpoints hold CPU tensors only.
+Each update's rollout is one segment (rl/segments.py): the learner draws the unit action noise
+for every env and step, and the envs are stepped for the whole rollout where they are — in this
+process by the learner's agent (`workers` 0), or inside Ray workers, each with a CPU copy of the
+agent whose weights the learner broadcasts once per update (rl/segment_workers.py). Both paths
+act with the same noise, so they run the same episodes for the same seed.
+
+`cfg.device` holds the agent, the in-process path's batched inference, the rollout tensors and
+the PPO update; the envs step numpy arrays on the CPU, and the reward scaler and random
+generators stay there too (the same random streams on any device). Checkpoints hold CPU tensors
+only.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -28,11 +36,12 @@ from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.checkpoints import init_agent_state, snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
-from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
+from corn_drake.rl.ppo import PPO, compute_gae
+from corn_drake.rl.segments import SegmentCollector
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.viz.learning_curves import plot_learning_curves
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
-from corn_drake.rl.run_progress import (count_episodes_per_object, make_env_batch, progress_state,
+from corn_drake.rl.run_progress import (count_episodes_per_object, progress_state,
                                         restore_progress, to_cpu)
 
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
@@ -40,13 +49,17 @@ CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "up
                    "history", "torch_rng", "generator", "np_rng")
 
 
-def _frozen_feature_cache(agent: TeacherAgent, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """For frozen encoders, compute features once at collection time, not every PPO epoch:
-    TeacherAgent.features returns obs["features"] when present."""
-    if agent.frozen_encoder:
-        obs = dict(obs)
-        obs["features"] = agent.features(obs)
-    return obs
+@dataclasses.dataclass
+class Rollout:
+    """One update's rollout on the learner's device: flat observations (T * N, ..., with a frozen
+    encoder's cached `features`), (T, N) tensors (actions (T, N, A), logp, values, scaled rewards,
+    terminated, truncated, final_values), the bootstrap values (N,), and the collection's
+    episodes and simulation errors."""
+    obs: dict[str, torch.Tensor]
+    stack: dict[str, torch.Tensor]
+    last_values: torch.Tensor
+    episodes: list[dict]
+    sim_errors: int
 
 
 class Trainer:
@@ -75,14 +88,29 @@ class Trainer:
         self._load()  # resumes from last.pt (or prev.pt beside it) when there is one
         if self.global_step == 0 and cfg.init_from:  # a new run of a curriculum
             self.agent.load_saved_state(init_agent_state(cfg.init_from), cfg.init_from)
-        self.envs = self._make_envs(n_envs)
+        self.rollouts = self._make_rollouts(n_envs)
 
-    def _make_envs(self, n_envs: int):
+    def _make_rollouts(self, n_envs: int):
+        """The run's collector: its envs in this process, stepped by the learner's own agent
+        (workers 0), or on `workers` Ray workers that step their own envs with a CPU copy."""
+        from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+
         cfg = self.cfg
         # A resumed run's envs continue the object rounds where the run stopped (on average).
         start = sum(self.episodes_per_object.values()) // n_envs
-        return make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
-                              cfg.ray_address, start)
+        factory = EnvFactory(cfg.env, cfg.seed, num_envs=n_envs, start_episode=start)
+        if cfg.workers > 0:
+            from corn_drake.rl.ray_workers import init_ray
+            from corn_drake.rl.segment_workers import RaySegmentCollectors
+
+            init_ray(cfg.ray_address or None)
+            return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent)
+        return SegmentCollector(EnvBatch(factory, cfg.envs_per_worker), self.agent, self.device)
+
+    @property
+    def envs(self):
+        """The in-process env batch (EnvBatch): its envs, for tests and `bench train`."""
+        return self.rollouts.envs
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self, snapshot: Path | None = None) -> None:
@@ -118,39 +146,39 @@ class Trainer:
         restore_progress(self, state)
 
     # --- one update --------------------------------------------------------------------------
-    def _collect(self, obs_np):
-        T, agent, device = self.cfg.rollout_steps, self.agent, self.device
-        buf = {k: [] for k in ("obs", "actions", "logp", "values", "rewards", "terminated",
-                                "truncated", "final_values")}
-        episodes, sim_errors = [], 0
-        for _ in range(T):
-            obs = _frozen_feature_cache(agent, obs_to_tensors(obs_np, device))
-            actions, logp, values = sample_actions(agent, obs, self.generator)
-            step = self.envs.step(actions.cpu().numpy())
-            final_values = torch.zeros(len(step.rewards), device=device)
-            if step.final_obs:
-                idx = sorted(step.final_obs)
-                final = obs_to_tensors({k: np.stack([step.final_obs[i][k] for i in idx])
-                                        for k in step.final_obs[idx[0]]}, device)
-                with torch.no_grad():
-                    final_values[idx] = agent(_frozen_feature_cache(agent, final))[1]
-            rewards = torch.as_tensor(step.rewards, dtype=torch.float32)
-            dones = torch.as_tensor(step.terminated | step.truncated)
-            scaled = self.reward_scaler(rewards, dones).float().to(device)
-            for key, value in (("obs", obs), ("actions", actions), ("logp", logp),
-                               ("values", values), ("rewards", scaled),
-                               ("terminated", torch.as_tensor(step.terminated, dtype=torch.float32,
-                                                              device=device)),
-                               ("truncated", torch.as_tensor(step.truncated, dtype=torch.float32,
-                                                             device=device)),
-                               ("final_values", final_values)):
-                buf[key].append(value)
-            episodes += step.episode_stats
-            sim_errors += step.sim_errors
-            obs_np = step.obs
-        with torch.no_grad():
-            last_values = agent(_frozen_feature_cache(agent, obs_to_tensors(obs_np, device)))[1]
-        return buf, last_values, obs_np, episodes, sim_errors
+    def _collect(self) -> Rollout:
+        """The update's segment, collected with this update's weights: the learner draws the
+        unit noise for every env and step (the CPU generator, as one draw per step), the
+        collector steps the envs, and the raw rewards are scaled here in step order."""
+        T, n_envs, device = self.cfg.rollout_steps, len(self.rollouts), self.device
+        action_dim = self.agent.log_std.shape[0]
+        noise = torch.stack([torch.randn((n_envs, action_dim), generator=self.generator)
+                             for _ in range(T)]).numpy()
+        self.rollouts.sync(self.agent, self.update_index)
+        segment = self.rollouts.collect(noise)
+        if segment.version != self.update_index:
+            raise RuntimeError(f"a segment acted with update {segment.version}'s weights in "
+                               f"update {self.update_index}: PPO needs on-policy data")
+        flat = {k: v.reshape(T * n_envs, *v.shape[2:]) for k, v in segment.obs.items()}
+        obs = obs_to_tensors(flat, device)
+        if segment.features is not None:
+            obs["features"] = torch.as_tensor(
+                segment.features.reshape(T * n_envs, *segment.features.shape[2:]), device=device)
+        dones = segment.terminated | segment.truncated
+        scaled = torch.stack([self.reward_scaler(torch.as_tensor(segment.rewards[t],
+                                                                 dtype=torch.float32),
+                                                 torch.as_tensor(dones[t])).float()
+                              for t in range(T)])
+
+        def tensor(x):
+            return torch.as_tensor(np.asarray(x, np.float32), device=device)
+
+        stack = {"actions": tensor(segment.actions), "logp": tensor(segment.logp),
+                 "values": tensor(segment.values), "rewards": scaled.to(device),
+                 "terminated": tensor(segment.terminated), "truncated": tensor(segment.truncated),
+                 "final_values": tensor(segment.final_values)}
+        return Rollout(obs, stack, tensor(segment.last_values), segment.episode_stats,
+                       segment.sim_errors)
 
     def train(self, progress: bool = True) -> dict:
         from torch.utils.tensorboard import SummaryWriter
@@ -158,18 +186,17 @@ class Trainer:
 
         self.out.mkdir(parents=True, exist_ok=True)
         writer = SummaryWriter(str(self.out / "tb"))
-        cfg, n_envs = self.cfg, len(self.envs)
-        obs_np = self.envs.reset()
+        cfg, n_envs = self.cfg, len(self.rollouts)
         bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
                    desc=f"train {cfg.policy}", unit="step")
         while self.global_step < cfg.total_steps:
             t0 = time.perf_counter()
-            buf, last_values, obs_np, episodes, sim_errors = self._collect(obs_np)
-            stack = {k: torch.stack(v) for k, v in buf.items() if k != "obs"}
+            rollout = self._collect()
+            stack, flat_obs = rollout.stack, rollout.obs
+            episodes, sim_errors = rollout.episodes, rollout.sim_errors
             adv, ret = compute_gae(stack["rewards"], stack["values"], stack["terminated"],
-                                   stack["truncated"], stack["final_values"], last_values,
+                                   stack["truncated"], stack["final_values"], rollout.last_values,
                                    cfg.ppo.gamma, cfg.ppo.gae_lambda)
-            flat_obs = {k: torch.cat([o[k] for o in buf["obs"]]) for k in buf["obs"][0]}
             stats = self.ppo.update(flat_obs, stack["actions"].flatten(0, 1),
                                     stack["logp"].flatten(0, 1), adv.flatten(), ret.flatten(),
                                     self.generator)
@@ -191,8 +218,8 @@ class Trainer:
                    "success_rate": float(np.mean([e["success"] for e in recent])) if recent else 0.0,
                    "return": float(np.mean([e["return"] for e in recent])) if recent else 0.0,
                    "episode_length": float(np.mean([e["length"] for e in recent])) if recent else 0.0}
-            if hasattr(self.envs, "restarts"):
-                row["worker_restarts"] = self.envs.restarts
+            if hasattr(self.rollouts, "restarts"):
+                row["worker_restarts"] = self.rollouts.restarts
             self.history.append(row)
             for key, value in row.items():
                 if key not in ("step", "update"):

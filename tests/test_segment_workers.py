@@ -1,0 +1,118 @@
+"""Ray workers that step their own envs for whole rollout segments (rl/segment_workers.py): the
+same episodes as in-process collection, the weights of the update they collect for, and a worker
+killed mid-rollout replaced without losing the update."""
+
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+import torch
+
+from corn_drake.config.training import TrainConfig
+from corn_drake.rl.trainer import Trainer
+from tests.waiting import wait_until
+
+ray = pytest.importorskip("ray")
+
+ENVS = 4
+
+
+def _cfg(workers: int, total_updates: int = 1, rollout: int = 8) -> TrainConfig:
+    cfg = TrainConfig(policy="state", workers=workers, envs_per_worker=ENVS // max(workers, 1),
+                      rollout_steps=rollout, total_steps=total_updates * ENVS * rollout,
+                      checkpoint_every=1)
+    cfg.env.task.episode_steps = 5  # episodes end inside a segment: resets and final values
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    from corn_drake.rl.ray_workers import init_ray
+
+    init_ray(num_cpus=2)
+    yield
+    ray.shutdown()
+
+
+def _assert_same_rollout(a, b) -> None:
+    for key in a.stack:
+        torch.testing.assert_close(a.stack[key], b.stack[key], msg=key)
+    for key in a.obs:
+        torch.testing.assert_close(a.obs[key], b.obs[key], msg=key)
+    torch.testing.assert_close(a.last_values, b.last_values)
+    # Batched inference over 2 envs (a worker) and over 4 (in-process) rounds differently in
+    # the last bits; nothing else differs.
+    assert [(e["object"], e["length"]) for e in a.episodes] == \
+        [(e["object"], e["length"]) for e in b.episodes]
+    assert [e["return"] for e in a.episodes] == pytest.approx([e["return"] for e in b.episodes],
+                                                              abs=1e-6)
+
+
+def test_ray_workers_collect_the_same_segments_and_updates_as_in_process(tmp_path, local_ray):
+    local = Trainer(_cfg(0, total_updates=2), tmp_path / "local")
+    remote = Trainer(_cfg(2, total_updates=2), tmp_path / "remote")
+    first = local._collect()
+    assert first.episodes  # 8 steps of 5-step episodes: every env ended one
+    _assert_same_rollout(remote._collect(), first)
+    # Whole updates: the second segment acts with the weights after the first update, which
+    # the workers only have through the broadcast.
+    local = Trainer(_cfg(0, total_updates=2), tmp_path / "local2")
+    remote = Trainer(_cfg(2, total_updates=2), tmp_path / "remote2")
+    a, b = local.train(progress=False), remote.train(progress=False)
+    assert [h["return"] for h in a["history"]] == pytest.approx(
+        [h["return"] for h in b["history"]], abs=1e-6)
+    # Adam turns last-bit differences of near-zero gradients into steps of up to its lr: the
+    # weights agree to ~2e-5 (measured), far inside one update's movement (lr 3e-4 a step).
+    for (name, p), q in zip(local.agent.state_dict().items(), remote.agent.state_dict().values()):
+        torch.testing.assert_close(p, q, atol=1e-4, rtol=1e-4, msg=name)
+    assert b["final"]["worker_restarts"] == 0
+
+
+def test_a_worker_acts_with_the_weights_of_the_update_it_collects_for(tmp_path, local_ray):
+    trainer = Trainer(_cfg(2), tmp_path)
+    old = {k: v.clone() for k, v in trainer.agent.state_dict().items()}
+    with torch.no_grad():  # what an update does to the weights, as far as the workers can tell
+        for p in trainer.agent.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    trainer.update_index = 1
+    rollout = trainer._collect()
+    T = trainer.cfg.rollout_steps
+    with torch.no_grad():
+        values = trainer.agent(rollout.obs)[1].reshape(T, ENVS)
+        trainer.agent.load_state_dict(old)
+        old_values = trainer.agent(rollout.obs)[1].reshape(T, ENVS)
+    torch.testing.assert_close(rollout.stack["values"], values, atol=1e-5, rtol=1e-5)
+    assert not torch.allclose(rollout.stack["values"], old_values, atol=1e-3)
+    # Weights not sent for this update: the segment says so and the learner refuses it.
+    trainer.update_index = 2
+    trainer.rollouts.sync = lambda agent, version: None
+    with pytest.raises(RuntimeError, match="update 1's weights in update 2"):
+        trainer._collect()
+
+
+def test_a_worker_killed_mid_rollout_is_replaced_without_losing_the_update(tmp_path, local_ray):
+    rollout_steps = 60  # a second or more of stepping: the kill lands inside it
+    # The same worker layout (not in-process: over 60 steps the last-bit differences of
+    # another inference batch size grow through the contacts).
+    undisturbed = Trainer(_cfg(2, rollout=rollout_steps), tmp_path / "undisturbed")._collect()
+    trainer = Trainer(_cfg(2, rollout=rollout_steps), tmp_path / "remote")
+    victim = trainer.rollouts.worker_pids()[0]
+    done = []
+    collecting = threading.Thread(target=lambda: done.append(trainer._collect()))
+    collecting.start()
+    # Kill once the worker is busy with the segment (its CPU time moves), not before.
+    import psutil
+
+    process = psutil.Process(victim)
+    busy_from = sum(process.cpu_times()[:2])
+    wait_until(lambda: sum(process.cpu_times()[:2]) > busy_from + 0.2,
+               "the worker to start stepping", poll_s=0.05)
+    os.kill(victim, signal.SIGKILL)
+    collecting.join()
+    assert trainer.rollouts.restarts == 1 and done
+    # The replacement collected the dead worker's segment again from its envs' first episodes,
+    # with the same weights and noise: the update is the one nothing disturbed.
+    _assert_same_rollout(done[0], undisturbed)
+    assert np.isfinite(done[0].stack["values"].numpy()).all()
