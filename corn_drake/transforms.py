@@ -59,3 +59,11 @@ def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
 def yaw_matrix(yaw: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def up_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    """Angle (rad) between the world's up direction seen in two body orientations: 0 when the
+    object rests on the same face in both (whatever the yaw), large when it tipped or rolled."""
+    up = np.array([0.0, 0.0, 1.0])
+    c = float((np.asarray(R_a).T @ up) @ (np.asarray(R_b).T @ up))
+    return math.acos(min(1.0, max(-1.0, c)))

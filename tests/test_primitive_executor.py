@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 from pydrake.geometry import Meshcat
+from pydrake.math import RotationMatrix
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError
@@ -153,6 +154,40 @@ def test_one_env_step_is_one_whole_primitive():
         assert env.primitives == expected and np.isfinite(reward)
         # The observation carries the same status.
         np.testing.assert_allclose(obs["executor"], env.executor_status(), atol=1e-6)
+
+
+# ----------------------------------------------------------------------------------- tipping
+
+def _tipped_goal_step(task: str, tip_penalty: float):
+    """One short push on a box whose episode goal is turned onto another face (90 deg about x),
+    so the box, still on its own face, counts as tipped by the env's rule."""
+    import dataclasses
+
+    from corn_drake.config.primitive import PrimitiveConfig
+    from corn_drake.transforms import quat_wxyz_to_matrix
+
+    env = PrimitiveEnv(load_primitive_env_config(task), PrimitiveConfig(tip_penalty=tip_penalty))
+    obs, _ = env.reset(seed=1)
+    goal = np.array(env.episode.goal_pose, float)
+    R = quat_wxyz_to_matrix(goal[3:]) @ np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+    goal[3:] = RotationMatrix(R).ToQuaternion().wxyz()
+    env.episode = dataclasses.replace(env.episode, goal_pose=goal)
+    index = _side_point(env, obs)
+    return env.step({"point": index, "motion": 0.3 * _inward(obs["normals"][index])})
+
+
+def test_tipping_ends_a_face_keeping_training_episode_with_the_penalty():
+    _, free, free_end, _, free_info = _tipped_goal_step("push", 0.0)
+    _, penalised, end, truncated, info = _tipped_goal_step("push", 1.5)
+    assert not free_end and "tipped" not in free_info
+    assert end and not truncated and info["tipped"]
+    # The same deterministic primitive: the rewards differ by the penalty alone.
+    assert penalised == pytest.approx(free - 1.5, abs=1e-6)
+
+
+def test_tipping_is_no_failure_on_the_6d_task_whose_goals_change_the_face():
+    _, _, end, _, info = _tipped_goal_step("full6d", 1.5)
+    assert not end and "tipped" not in info
 
 
 # ------------------------------------------------------------------------------- unreachable

@@ -23,17 +23,17 @@ from collections import Counter
 
 import numpy as np
 
+from corn_drake.tasks.faces import TIPPED_ANGLE_RAD
+from corn_drake.transforms import quat_wxyz_to_matrix, up_angle
+
 FAILURES = ("success", "sim_error", "out_of_workspace", "never_touched", "tipped_or_rolled",
             "near_miss", "moved_away_from_goal", "short_of_goal")
 UNTOUCHED_DISTANCE_M = 0.01
 UNTOUCHED_ANGLE_RAD = 0.05
-TIPPED_ANGLE_RAD = 0.5
 NEAR_MISS_FACTOR = 2.0
 
 
 def _rotation(pose7: np.ndarray) -> np.ndarray:
-    from corn_drake.transforms import quat_wxyz_to_matrix
-
     return quat_wxyz_to_matrix(np.asarray(pose7, float)[3:7])
 
 
@@ -47,13 +47,11 @@ def motion_summary(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> dict
     angle between its body-frame up directions at the end and at the goal."""
     start, end, goal = (np.asarray(x, float) for x in (start, end, goal))
     R0, R1, Rg = _rotation(start), _rotation(end), _rotation(goal)
-    up = np.array([0.0, 0.0, 1.0])
-    up_end, up_goal = R1.T @ up, Rg.T @ up  # the world's up seen in the body frame
     return {"moved": float(np.linalg.norm(end[:3] - start[:3])),
             "turned": _angle(R0.T @ R1),
             "start_position_error": float(np.linalg.norm(goal[:2] - start[:2])),
             "end_position_error": float(np.linalg.norm(goal[:2] - end[:2])),
-            "up_error": float(np.arccos(np.clip(up_end @ up_goal, -1.0, 1.0)))}
+            "up_error": up_angle(R1, Rg)}
 
 
 def failure_category(row: dict, task) -> str:

@@ -11,7 +11,8 @@ how much the primitive closed the mean distance between the object's bounding-bo
 the goal's (the paper's keypoints: position and the full 3-D orientation), plus the task's
 success_reward on success; info["task_reward"] keeps the teacher's per-period rewards summed.
 
-Episode end: success or out of workspace (terminated); PrimitiveConfig.max_primitives
+Episode end: success, out of workspace, or (with PrimitiveConfig.tip_penalty on a task whose goal
+keeps the face) the object tipped onto another face (terminated, info["tipped"]); max_primitives
 primitives (HACMan's 10) or the task's episode_steps of policy periods (truncated), whichever
 comes first.
 
@@ -37,6 +38,7 @@ from corn_drake.rl.env import DiagramEnv, TeacherObservationReader, zeros_like_s
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM, STATUS_LAYOUT,
                                                    make_primitive)
+from corn_drake.tasks.faces import TIPPED_ANGLE_RAD, face_error, goal_keeps_face
 
 PRIMITIVE_OBS_KEYS = ("normals", "object_position", "executor")
 
@@ -157,7 +159,17 @@ class PrimitiveEnv(DiagramEnv):
         reward = self.primitive_cfg.progress_reward * (distance_before - self.keypoint_distance())
         if info["status"]["success"] > 0:
             reward += self.cfg.task.success_reward
+        elif not terminated and self._tipped():
+            reward -= self.primitive_cfg.tip_penalty
+            terminated, truncated = True, False
+            info["tipped"] = True
         return obs, reward, terminated, truncated, info
+
+    def _tipped(self) -> bool:
+        """Whether the tipping rule (PrimitiveConfig.tip_penalty) ends this episode: it is on,
+        the task's goal keeps the face, and the object now rests on another one."""
+        return self.primitive_cfg.tip_penalty > 0 and goal_keeps_face(self.cfg.task) and \
+            face_error(self.object_pose(), self.episode.goal_pose) > TIPPED_ANGLE_RAD
 
     def keypoint_distance(self) -> float:
         """Mean distance (m) between the object's bounding-box keypoints now and at the goal
