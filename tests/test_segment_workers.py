@@ -102,12 +102,14 @@ def test_a_worker_killed_mid_rollout_is_replaced_without_losing_the_update(tmp_p
     done = []
     collecting = threading.Thread(target=lambda: done.append(trainer._collect()))
     collecting.start()
-    # Kill once the worker is busy with the segment (its CPU time moves), not before.
+    # Kill once the worker is busy with the segment (its CPU time moves): early in its ~1 s of
+    # stepping, so the kill lands inside it even on a busy machine (a kill before it starts
+    # would be replaced the same way; one after it ends would test nothing, and fail).
     import psutil
 
     process = psutil.Process(victim)
     busy_from = sum(process.cpu_times()[:2])
-    wait_until(lambda: sum(process.cpu_times()[:2]) > busy_from + 0.2,
+    wait_until(lambda: sum(process.cpu_times()[:2]) > busy_from + 0.05,
                "the worker to start stepping", poll_s=0.05)
     os.kill(victim, signal.SIGKILL)
     collecting.join()

@@ -58,9 +58,10 @@ def add_arguments(parser):
                              "configured physics against (physics_speedup): by default the "
                              "settings before the throughput work")
     parser.add_argument("--objects", nargs="+", default=None, metavar="LIBRARY",
-                        help="bare-physics steps/s of every "
-                             "object of these libraries (two or more: the same objects, e.g. "
-                             "built with another --max-hulls, alternating; ratios to the first; default: none, the env measurement)")
+                        help="bare-physics steps/s of every object of these libraries instead "
+                             "(two or more: the same objects, e.g. built with another "
+                             "--max-hulls, alternating; ratios to the first; default: none, the "
+                             "env measurement)")
     parser.add_argument("--objects-split", default="unseen", choices=("train", "unseen", "all"),
                         help="with --objects: which of the libraries' objects (default: unseen)")
     add_renamed(parser, "--config", "--task", " (a task name or a teacher-diagram YAML, as "

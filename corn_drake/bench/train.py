@@ -2,9 +2,9 @@
 
 The trainer (corn_drake/rl/trainer.py, in-process envs, the push task by default, a randomly
 initialised encoder) runs a few updates; then the bare plant of the same scene is driven by
-recorded torques exactly as `bench sim` does it (bench/bare_physics.py bare_physics_rate), on one of the
-trainer's own envs. `train_ratio` = train / bare is the fraction of the physics-only speed that
-training keeps (issue 14 asks >= 0.8).
+recorded torques exactly as `bench sim` does it (bench/bare_physics.py bare_physics_rate), on
+one of the trainer's own envs. `train_ratio` = train / bare is the fraction of the physics-only
+speed that training keeps (issue 14 asks >= 0.8).
 
 Rates and shares are measured on the timed updates only, after --warmup-updates untimed ones
 (bench/timed_training.py: the windows, and why), the trainer's own steps_per_s reported beside
