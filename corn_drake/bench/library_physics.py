@@ -35,7 +35,7 @@ def common_objects(libraries: list[str], split: str | None) -> list[str]:
 
     ids = list_objects(libraries[0], split)
     if not ids:
-        raise InputError(f"--objects {libraries[0]}: no {split or ''} objects".replace("  ", " "))
+        raise InputError(f"--objects {libraries[0]}: no {split + ' ' if split else ''}objects")
     for library in libraries[1:]:
         missing = sorted(set(ids) - set(list_objects(library, split)))
         if missing:
@@ -45,12 +45,12 @@ def common_objects(libraries: list[str], split: str | None) -> list[str]:
     return ids
 
 
-def hull_count(library: str, object_id: str) -> int | None:
+def hull_counts(library: str) -> dict[str, int | None]:
+    """Object id -> its number of hulls (the manifest's count, else its hull files)."""
     from corn_drake.assets.manifest import read_manifest
 
-    entry = read_manifest(Path(library)).get(Path(library), object_id)
-    return entry.num_hulls if entry.num_hulls is not None else (
-        len(entry.hulls) if entry.hulls else None)
+    return {o.id: o.num_hulls if o.num_hulls is not None else (len(o.hulls) if o.hulls else None)
+            for o in read_manifest(Path(library)).objects}
 
 
 def measure_libraries(base_cfg, libraries: list[str], split: str | None, steps: int,
@@ -62,6 +62,7 @@ def measure_libraries(base_cfg, libraries: list[str], split: str | None, steps: 
     from corn_drake.rl.env import TeacherEnv
 
     ids = common_objects(libraries, split)
+    hulls = [hull_counts(library) for library in libraries]
     per_object = {}
     for object_id in ids:
         recorded = []
@@ -75,7 +76,7 @@ def measure_libraries(base_cfg, libraries: list[str], split: str | None, steps: 
             for i, (env, rec) in enumerate(recorded):
                 rates[i] = max(rates[i], steps / replay_bare(env, rec)[0])
         per_object[object_id] = {
-            "hulls": [hull_count(lib, object_id) for lib in libraries],
+            "hulls": [counts[object_id] for counts in hulls],
             "bare_physics_policy_steps_per_s": rates,
             "ratio": [r / rates[0] for r in rates]}
         print(f"  {object_id}: hulls {per_object[object_id]['hulls']}, "
