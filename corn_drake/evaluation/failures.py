@@ -24,7 +24,7 @@ from collections import Counter
 import numpy as np
 
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD
-from corn_drake.transforms import quat_wxyz_to_matrix, up_angle
+from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle, up_angle
 
 FAILURES = ("success", "sim_error", "out_of_workspace", "never_touched", "tipped_or_rolled",
             "near_miss", "moved_away_from_goal", "short_of_goal")
@@ -37,10 +37,6 @@ def _rotation(pose7: np.ndarray) -> np.ndarray:
     return quat_wxyz_to_matrix(np.asarray(pose7, float)[3:7])
 
 
-def _angle(R: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
-
-
 def motion_summary(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> dict:
     """The object's motion over an episode, from its start, end and goal poses ([p, q_wxyz]):
     how far it moved and turned, its xy distance to the goal at the start and the end, and the
@@ -48,7 +44,7 @@ def motion_summary(start: np.ndarray, end: np.ndarray, goal: np.ndarray) -> dict
     start, end, goal = (np.asarray(x, float) for x in (start, end, goal))
     R0, R1, Rg = _rotation(start), _rotation(end), _rotation(goal)
     return {"moved": float(np.linalg.norm(end[:3] - start[:3])),
-            "turned": _angle(R0.T @ R1),
+            "turned": rotation_angle(R0.T @ R1),
             "start_position_error": float(np.linalg.norm(goal[:2] - start[:2])),
             "end_position_error": float(np.linalg.norm(goal[:2] - end[:2])),
             "up_error": up_angle(R1, Rg)}

@@ -28,7 +28,7 @@ from corn_drake.errors import InputError
 from corn_drake.rl.primitive_agent import PrimitiveAgent
 from corn_drake.rl.replay import ReplayBuffer
 from corn_drake.rl.run_progress import make_env_batch, recent_mean, to_cpu
-from corn_drake.rl.td3 import TD3Learner, TD3Settings
+from corn_drake.rl.td3 import TD3Learner, TD3Settings, choosable
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 
@@ -119,9 +119,9 @@ class PrimitiveTrainer:
         cfg = self.cfg
         n, num_locations = candidates.shape
         if self.global_step < cfg.random_steps:
-            # Uniform over each state's usable locations (all of them if none is usable).
-            usable = features["mask"].numpy() > 0.5
-            usable |= ~usable.any(axis=1, keepdims=True)
+            # Uniform over each state's choosable locations (td3.choosable: the usable ones, or
+            # all of them if none is usable).
+            usable = choosable(features["mask"]).numpy()
             weights = usable / usable.sum(axis=1, keepdims=True)
             locations = np.array([self.np_rng.choice(num_locations, p=w) for w in weights])
             motions = self.np_rng.uniform(-1.0, 1.0, (n, 3)).astype(np.float32)

@@ -10,14 +10,22 @@ import torch
 from corn_drake.rl.vec_env import EnvBatch, EnvFactory
 
 
+def run_env_factory(env_config, seed: int, workers: int, envs_per_worker: int,
+                    start_episode: int = 0, primitive=None) -> EnvFactory:
+    """The recipe of a run's envs: all its workers' envs (at least one worker's) share the
+    object rounds, starting at `start_episode`."""
+    return EnvFactory(env_config, seed, num_envs=max(workers, 1) * envs_per_worker,
+                      start_episode=start_episode, primitive=primitive)
+
+
 def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
                    ray_address: str = "", start_episode: int = 0, primitive=None):
     """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
-    Ray actors. `env_config` is a teacher or a student diagram config (EnvFactory); with
-    `primitive` (a PrimitiveConfig), contact-primitive envs of the teacher config."""
-    n_envs = max(workers, 1) * envs_per_worker
-    factory = EnvFactory(env_config, seed, num_envs=n_envs, start_episode=start_episode,
-                         primitive=primitive)
+    Ray actors stepped in lock step. `env_config` is a teacher or a student diagram config
+    (EnvFactory); with `primitive` (a PrimitiveConfig), contact-primitive envs of the teacher
+    config. (The PPO trainer collects whole segments instead: rl/segment_workers.py.)"""
+    factory = run_env_factory(env_config, seed, workers, envs_per_worker, start_episode,
+                              primitive)
     if workers > 0:
         from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
 

@@ -36,17 +36,21 @@ from torch import nn
 Features = Mapping[str, torch.Tensor]
 
 
+def choosable(mask: torch.Tensor) -> torch.Tensor:
+    """(B, L) bool: the locations a state may choose from, given its features["mask"] (B, L; 1
+    usable, 0 not). A state with no usable location keeps all of them."""
+    usable = torch.as_tensor(mask) > 0.5
+    return usable | ~usable.any(dim=1, keepdim=True)
+
+
 def masked(scores: torch.Tensor, features: Features) -> torch.Tensor:
-    """`scores` (B, L) with the locations that features["mask"] (B, L; 1 usable, 0 not, when
-    the key is present) rules out set to -inf, so no choice and no bootstrap target takes them:
-    a location the policy never takes has a Q value nothing ever trained. A state with no usable
-    location keeps all of them."""
+    """`scores` (B, L) with the locations features["mask"] rules out (when the key is present;
+    `choosable`) set to -inf, so no choice and no bootstrap target takes them: a location the
+    policy never takes has a Q value nothing ever trained."""
     mask = features.get("mask") if isinstance(features, Mapping) else None
     if mask is None:
         return scores
-    usable = torch.as_tensor(mask, device=scores.device) > 0.5
-    usable = usable | ~usable.any(dim=1, keepdim=True)
-    return scores.masked_fill(~usable, float("-inf"))
+    return scores.masked_fill(~choosable(mask).to(scores.device), float("-inf"))
 
 
 @dataclass

@@ -42,7 +42,7 @@ from corn_drake.contract import RECENT_EPISODES
 from corn_drake.viz.learning_curves import plot_learning_curves
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
 from corn_drake.rl.run_progress import (count_episodes_per_object, progress_state,
-                                        restore_progress, to_cpu)
+                                        restore_progress, run_env_factory, to_cpu)
 
 # What _load reads unconditionally: a checkpoint without one of these cannot resume the run.
 CHECKPOINT_KEYS = ("policy", "agent", "ppo", "reward_scaler", "global_step", "update_index",
@@ -93,12 +93,12 @@ class Trainer:
     def _make_rollouts(self, n_envs: int):
         """The run's collector: its envs in this process, stepped by the learner's own agent
         (workers 0), or on `workers` Ray workers that step their own envs with a CPU copy."""
-        from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+        from corn_drake.rl.vec_env import EnvBatch
 
         cfg = self.cfg
         # A resumed run's envs continue the object rounds where the run stopped (on average).
         start = sum(self.episodes_per_object.values()) // n_envs
-        factory = EnvFactory(cfg.env, cfg.seed, num_envs=n_envs, start_episode=start)
+        factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker, start)
         if cfg.workers > 0:
             from corn_drake.rl.ray_workers import init_ray
             from corn_drake.rl.segment_workers import RaySegmentCollectors
