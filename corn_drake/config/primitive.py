@@ -28,7 +28,8 @@ class PrimitiveConfig:
               "retreat_steps": ">= 1", "reach_tolerance": "> 0", "turn_tolerance": "> 0",
               "approach_steps": ">= 1",
               "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
-              "progress_reward": ">= 0", "tip_penalty": ">= 0"}
+              "progress_reward": ">= 0", "tip_penalty": ">= 0", "push_height": ">= 0",
+              "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]"}
     # The tool point stops this far off the surface along the normal before the push. The
     # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
     pre_contact_distance: float = 0.04
@@ -78,6 +79,22 @@ class PrimitiveConfig:
     # Measured with 1.0 on push_turn: the policy learned to stop touching the object (greedy
     # success 0.025 against 0.165 without it), hence off by default.
     tip_penalty: float = 0.0
+    # Side pushes aim this high above the table (m; the tool point), lowered from the chosen
+    # contact point as far as the object's cloud leaves room for the fingers
+    # (systems/low_push.py: a push at mid-height tips an upright bottle or a tall box, one near
+    # the table slides it). 0: push at the chosen point's own height.
+    push_height: float = 0.0
+    # The push's vertical part: the motion's z times push_distance times this. 1: a full 3-D
+    # push. Why less: the push policy learned to press down hard (motion z near -1 in most of
+    # its pushes), which the push task, blind to orientation, never punished, and which rolls
+    # or flips lying cylinders and wedges (29 % of its primitives tipped the object on
+    # push_turn's unseen episodes; docs/results/primitive/).
+    vertical_push: float = 1.0
+    # For a side contact the fingers lean this far (degrees) from vertical toward the surface,
+    # the palm away from it (systems/primitive_executor.facing_rotation: with vertical fingers
+    # the palm, 2.1 cm deeper than they are, meets a tall object first, 4.5-10 cm above the
+    # tool point, and the push tips it). 0: vertical fingers.
+    finger_tilt_deg: float = 0.0
 
 
 @dc.dataclass

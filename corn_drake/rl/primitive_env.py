@@ -36,6 +36,7 @@ from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
 from corn_drake.rl.env import DiagramEnv, TeacherObservationReader, zeros_like_space
 from corn_drake.scene.objects import ObjectSpec
+from corn_drake.systems.low_push import push_contact
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM, STATUS_LAYOUT,
                                                    make_primitive)
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD, face_error, goal_keeps_face
@@ -133,8 +134,8 @@ class PrimitiveEnv(DiagramEnv):
         obs = self._observation()
         status = obs["executor"]
         sequence = int(round(status[STATUS_LAYOUT["count"]])) + 1
-        primitive = make_primitive(obs["cloud"][point], obs["normals"][point], motion, point,
-                                   sequence)
+        aim, normal = push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
+        primitive = make_primitive(aim, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
         distance_before = self.keypoint_distance()
         total, ticks = 0.0, 0

@@ -1,17 +1,23 @@
 """Off-policy training of the contact-primitive policy (`corn-drake train --policy primitive`).
 
-Each loop: every env of the batch (in-process, or on Ray workers with `--workers`) runs one
-primitive chosen by the current policy (softmax over per-location scores + motion noise; the
-first `random_steps` primitives uniformly random), the transitions go into the replay buffer as
-per-location features (the frozen encoder runs once per observation, at collection), and the
-learner takes `updates_per_step` TD3 steps per primitive collected (rl/td3.py).
+Collection (rl/primitive_collection.py): every env runs primitives chosen by the current policy
+(softmax over per-location scores + motion noise; the first `random_steps` primitives uniformly
+random); the transitions go into the replay buffer as per-location features (the frozen encoder
+runs once per observation, where the envs are), and the learner takes `updates_per_step` TD3
+steps per primitive collected (rl/td3.py), on `--device`.
+- In-process (`--workers 0`): one round (a primitive in every env) per loop, then its updates;
+  a seed repeats a run exactly.
+- Ray (`--workers N`): each worker steps its own envs with its own copy of the networks, one
+  round per request, asynchronously: the learner updates while the workers step
+  (rl/primitive_workers.py).
 
 Run folder: config.yaml, encoder.pt (the frozen encoder, copied in so the folder is
 self-contained), checkpoints/last.pt (+ prev.pt) and checkpoints/replay_<step>.npz, tb/
 (TensorBoard), metrics.json (history rows every `log_every` primitives), plots/. A killed run
 resumes from last.pt at the step it was saved: networks, targets, optimisers, replay, counters
 and random streams come back; the envs start fresh episodes (the episode cut by the kill is not
-replayed), continuing the rounds over the train objects.
+replayed), continuing the rounds over the train objects. (Ray workers' own streams restart from
+the seed and the step resumed at: a resumed Ray run goes on with new draws.)
 """
 
 from __future__ import annotations
@@ -25,10 +31,12 @@ import torch
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.errors import InputError
+from corn_drake.rl.device import training_device
 from corn_drake.rl.primitive_agent import PrimitiveAgent
+from corn_drake.rl.primitive_collection import Exploration, PrimitiveTransitions
 from corn_drake.rl.replay import ReplayBuffer
-from corn_drake.rl.run_progress import make_env_batch, recent_mean, to_cpu
-from corn_drake.rl.td3 import TD3Learner, TD3Settings, choosable
+from corn_drake.rl.run_progress import recent_mean, run_env_factory, to_cpu
+from corn_drake.rl.td3 import TD3Learner, TD3Settings
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 
@@ -43,10 +51,6 @@ def td3_settings(cfg: PrimitiveTrainConfig) -> TD3Settings:
                        batch_size=cfg.batch_size)
 
 
-def _numpy(features: dict[str, torch.Tensor], rows) -> dict[str, np.ndarray]:
-    return {k: v[rows].cpu().numpy() for k, v in features.items()}
-
-
 class PrimitiveTrainer:
     def __init__(self, cfg: PrimitiveTrainConfig, out: str | Path, encoder):
         self.cfg, self.out = cfg, Path(out)
@@ -54,7 +58,7 @@ class PrimitiveTrainer:
         self.np_rng = np.random.default_rng(cfg.seed)
         self.agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive)
         self.learner = TD3Learner(self.agent.actor, self.agent.critic, td3_settings(cfg),
-                                  seed=cfg.seed)
+                                  device=training_device(cfg.device), seed=cfg.seed)
         self.replay = ReplayBuffer(cfg.replay_capacity)
         self.global_step, self.episodes, self.history = 0, 0, []
         self.recent_episodes: list[dict] = []
@@ -63,8 +67,27 @@ class PrimitiveTrainer:
         if self.global_step == 0 and cfg.init_from:
             self._start_from(cfg.init_from)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
-        self.envs = make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
-                                   cfg.ray_address, self.episodes // n_envs, cfg.primitive)
+        factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
+                                  self.episodes // n_envs, cfg.primitive)
+        self.collector = self.workers = None
+        if cfg.workers > 0:
+            from corn_drake.rl.primitive_workers import RayPrimitiveCollectors
+            from corn_drake.rl.ray_workers import init_ray
+
+            init_ray(cfg.ray_address or None)
+            self.workers = RayPrimitiveCollectors(factory, cfg.workers, cfg.envs_per_worker,
+                                                  self.agent, cfg.seed, self.global_step)
+        else:
+            from corn_drake.rl.primitive_collection import PrimitiveCollector
+            from corn_drake.rl.vec_env import EnvBatch
+
+            self.collector = PrimitiveCollector(EnvBatch(factory, cfg.envs_per_worker),
+                                                self.agent, self.learner.select)
+
+    @property
+    def envs(self):
+        """The in-process env batch (None when Ray workers hold the envs)."""
+        return self.collector.envs if self.collector is not None else None
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -114,42 +137,39 @@ class PrimitiveTrainer:
         self.learner.actor_target.load_state_dict(self.agent.actor.state_dict())
         self.learner.critic_target.load_state_dict(self.agent.critic.state_dict())
 
-    # --- one round of primitives -------------------------------------------------------------
-    def _choose(self, features, candidates) -> tuple[np.ndarray, np.ndarray]:
+    # --- collection ----------------------------------------------------------------------------
+    def _exploration(self, step: int) -> Exploration:
+        """How primitive number `step` of the run is chosen."""
         cfg = self.cfg
-        n, num_locations = candidates.shape
-        if self.global_step < cfg.random_steps:
-            # Uniform over each state's choosable locations (td3.choosable: the usable ones, or
-            # all of them if none is usable).
-            usable = choosable(features["mask"]).numpy()
-            weights = usable / usable.sum(axis=1, keepdims=True)
-            locations = np.array([self.np_rng.choice(num_locations, p=w) for w in weights])
-            motions = self.np_rng.uniform(-1.0, 1.0, (n, 3)).astype(np.float32)
-        else:
-            locations, motions, _ = self.learner.select(
-                features, greedy=False, temperature=cfg.temperature,
-                motion_noise=cfg.motion_noise, rng=self.np_rng)
-        return locations, motions
+        return Exploration(random=step < cfg.random_steps, temperature=cfg.temperature,
+                           motion_noise=cfg.motion_noise)
 
-    def _round(self, obs, features, candidates):
-        """One primitive in every env: transitions into the replay; returns the next
-        (obs, features, candidates) and the episodes that ended."""
-        locations, motions = self._choose(features, candidates)
-        points = candidates.numpy()[np.arange(len(locations)), np.asarray(locations)]
-        actions = [{"point": int(p), "motion": m} for p, m in zip(points, motions)]
-        step = self.envs.step(actions)
-        next_features, next_candidates = self.agent.features(step.obs)
-        target = {k: v.clone() for k, v in next_features.items()}
-        if step.final_obs:  # an ended episode's transition leads to its last observation
-            ended = sorted(step.final_obs)
-            final, _ = self.agent.features({k: np.stack([step.final_obs[i][k] for i in ended])
-                                            for k in step.final_obs[ended[0]]})
-            for key in target:
-                target[key][ended] = final[key]
-        rows = np.arange(len(actions))
-        self.replay.add_batch(_numpy(features, rows), np.asarray(locations), motions,
-                              step.rewards, step.terminated, _numpy(target, rows))
-        return step, next_features, next_candidates
+    def _round(self) -> PrimitiveTransitions:
+        """In-process: one primitive in every env, chosen with the trainer's own stream."""
+        return self.collector.collect(1, self._exploration(self.global_step), self.np_rng)
+
+    def _arrivals(self):
+        """Transitions as they are collected: in-process one round at a time; with Ray
+        workers, whichever worker's round comes back first, that worker being sent its next
+        round (acting with the weights as they are then) before the learner updates on it."""
+        if self.workers is None:
+            while True:
+                yield self._round()
+        workers, submitted = self.workers, self.global_step
+        for w in workers.idle_workers():
+            workers.publish(self.agent, self.learner.updates)
+            workers.submit(w, 1, self._exploration(submitted))
+            submitted += workers.envs_per_worker
+        while True:
+            w, transitions = workers.next_ready()
+            workers.publish(self.agent, self.learner.updates)
+            workers.submit(w, 1, self._exploration(submitted))
+            submitted += workers.envs_per_worker
+            yield transitions
+
+    def _store(self, t: PrimitiveTransitions) -> None:
+        self.replay.add_batch(t.features, t.locations, t.motions, t.rewards, t.terminated,
+                              t.next_features)
 
     def train(self, progress: bool = True) -> dict:
         from torch.utils.tensorboard import SummaryWriter
@@ -160,21 +180,20 @@ class PrimitiveTrainer:
         cfg = self.cfg
         self.out.mkdir(parents=True, exist_ok=True)
         writer = SummaryWriter(str(self.out / "tb"))
-        obs = self.envs.reset()
-        features, candidates = self.agent.features(obs)
         bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
                    desc="train primitive", unit="primitive")
         losses: list[dict] = []
         window = {"t0": time.perf_counter(), "primitives": 0}
         last_log = self.global_step // cfg.log_every
         last_checkpoint = self.global_step // cfg.checkpoint_every
-        n = len(self.envs)
+        arrivals = self._arrivals()
         while self.global_step < cfg.total_steps:
-            step, features, candidates = self._round(obs, features, candidates)
-            obs = step.obs
+            transitions = next(arrivals)
+            self._store(transitions)
+            n = len(transitions)
             self.global_step += n
             window["primitives"] += n
-            for stats in step.episode_stats:
+            for stats in transitions.episode_stats:
                 self.episodes += 1
                 self.recent_episodes = (self.recent_episodes + [stats])[-RECENT_EPISODES:]
             if len(self.replay) >= cfg.learning_starts:
@@ -191,11 +210,15 @@ class PrimitiveTrainer:
                 last_checkpoint = self.global_step // cfg.checkpoint_every
                 self._save()
         self._save()
+        if self.workers is not None:
+            self.workers.close()
         writer.close()
         bar.close()
         metrics = {"policy": cfg.policy, "global_step": self.global_step,
                    "episodes": self.episodes, "final": self.history[-1] if self.history else {},
                    "history": self.history}
+        if self.workers is not None:
+            metrics["worker_restarts"] = self.workers.restarts
         write_json(self.out / "metrics.json", metrics)
         if self.history:
             plot_learning_curves({cfg.policy: self.history},

@@ -53,6 +53,48 @@ def masked(scores: torch.Tensor, features: Features) -> torch.Tensor:
     return scores.masked_fill(~choosable(mask).to(scores.device), float("-inf"))
 
 
+def select_primitives(scores_and_motions: tuple[torch.Tensor, torch.Tensor], *, greedy: bool,
+                      temperature: float = 1.0, motion_noise: float = 0.0,
+                      rng: np.random.Generator | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(location (B,) int64, motion (B, motion_dim) float32, scores (B, L) float32) from the
+    per-location scores (-inf where masked) and motions of a batch of states. A free function so
+    a collector holding only a copy of the actor and critic (a Ray worker,
+    rl/primitive_collection.py) chooses exactly as the learner does.
+
+    greedy: the best-scoring location and the actor's motion there. Otherwise the location
+    is drawn from softmax(scores / temperature) and N(0, motion_noise) is added to the motion
+    (clipped to [-1, 1]); all randomness comes from `rng`, so a seed repeats the choices.
+    """
+    if not greedy:
+        if rng is None:
+            raise ValueError("rng: exploring (greedy=False) needs a numpy Generator")
+        if not (temperature > 0 and math.isfinite(temperature)):
+            raise ValueError(f"temperature: expected a finite value > 0, got {temperature!r}")
+        if not (motion_noise >= 0 and math.isfinite(motion_noise)):
+            raise ValueError(f"motion_noise: expected a finite value >= 0, got "
+                             f"{motion_noise!r}")
+    q1, motions = scores_and_motions
+    scores = q1.cpu().numpy().astype(np.float32)
+    motions = motions.cpu().numpy().astype(np.float32)
+    batch = np.arange(scores.shape[0])
+    if greedy:
+        location = scores.argmax(axis=1).astype(np.int64)
+        return location, motions[batch, location], scores
+    # Softmax in float64 with the row max removed: no overflow for any score scale.
+    logits = scores.astype(np.float64) / temperature
+    probs = np.exp(logits - logits.max(axis=1, keepdims=True))
+    cdf = np.cumsum(probs / probs.sum(axis=1, keepdims=True), axis=1)
+    draws = rng.random(scores.shape[0])
+    # Inverse-CDF sampling; the clip guards a cdf whose last entry rounds below 1.
+    location = np.minimum((cdf < draws[:, None]).sum(axis=1),
+                          scores.shape[1] - 1).astype(np.int64)
+    motion = motions[batch, location]
+    if motion_noise > 0:
+        motion = motion + rng.normal(0.0, motion_noise, size=motion.shape)
+    return location, np.clip(motion, -1.0, 1.0).astype(np.float32), scores
+
+
 @dataclass
 class TD3Settings:
     """Learner settings. The defaults are TD3's (Fujimoto et al. 2018) except the batch size and
@@ -141,39 +183,10 @@ class TD3Learner:
     def select(self, features: Features, *, greedy: bool, temperature: float = 1.0,
                motion_noise: float = 0.0, rng: np.random.Generator | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(location (B,) int64, motion (B, motion_dim) float32, scores (B, L) float32).
-
-        greedy: the best-scoring location and the actor's motion there. Otherwise the location
-        is drawn from softmax(scores / temperature) and N(0, motion_noise) is added to the motion
-        (clipped to [-1, 1]); all randomness comes from `rng`, so a seed repeats the choices.
-        """
-        if not greedy:
-            if rng is None:
-                raise ValueError("rng: exploring (greedy=False) needs a numpy Generator")
-            if not (temperature > 0 and math.isfinite(temperature)):
-                raise ValueError(f"temperature: expected a finite value > 0, got {temperature!r}")
-            if not (motion_noise >= 0 and math.isfinite(motion_noise)):
-                raise ValueError(f"motion_noise: expected a finite value >= 0, got "
-                                 f"{motion_noise!r}")
-        q1, motions = self._scores_and_motions(features)
-        scores = q1.cpu().numpy().astype(np.float32)
-        motions = motions.cpu().numpy().astype(np.float32)
-        batch = np.arange(scores.shape[0])
-        if greedy:
-            location = scores.argmax(axis=1).astype(np.int64)
-            return location, motions[batch, location], scores
-        # Softmax in float64 with the row max removed: no overflow for any score scale.
-        logits = scores.astype(np.float64) / temperature
-        probs = np.exp(logits - logits.max(axis=1, keepdims=True))
-        cdf = np.cumsum(probs / probs.sum(axis=1, keepdims=True), axis=1)
-        draws = rng.random(scores.shape[0])
-        # Inverse-CDF sampling; the clip guards a cdf whose last entry rounds below 1.
-        location = np.minimum((cdf < draws[:, None]).sum(axis=1),
-                              scores.shape[1] - 1).astype(np.int64)
-        motion = motions[batch, location]
-        if motion_noise > 0:
-            motion = motion + rng.normal(0.0, motion_noise, size=motion.shape)
-        return location, np.clip(motion, -1.0, 1.0).astype(np.float32), scores
+        """The learner's networks choosing primitives: select_primitives with its actor and
+        critic on its device."""
+        return select_primitives(self._scores_and_motions(features), greedy=greedy,
+                                 temperature=temperature, motion_noise=motion_noise, rng=rng)
 
     # --------------------------------------------------------------------------------- learning
 

@@ -85,19 +85,31 @@ def make_primitive(point, normal, motion, location: int, sequence: int) -> np.nd
     return out
 
 
-def facing_rotation(R_tool: np.ndarray, facing: np.ndarray) -> np.ndarray:
+def facing_rotation(R_tool: np.ndarray, facing: np.ndarray, tilt: float = 0.0) -> np.ndarray:
     """The tool rotation a primitive holds: fingers straight down and, for a side contact
     (`facing`, the normal's horizontal unit direction; zeros for a top contact), the hand's
     narrow side (its x axis: the palm is 0.063 m deep along x, 0.205 m wide along y) toward
     the surface, so the wide palm, 4.5 cm above the tool point, passes beside the object
-    instead of landing on its top. Of the two such yaws, the one nearer the current."""
+    instead of landing on its top. Of the two such yaws, the one nearer the current.
+
+    `tilt` (rad, side contacts only): the fingers lean that far from vertical toward the
+    surface, so the palm leans away from it. Why: the palm is 2.1 cm deeper than the fingers
+    along x, so with vertical fingers it meets the object before they do, 4.5-10 cm above the
+    tool point, and a push there tips a tall object however low the fingers are; a 30 degree
+    lean moves the palm's lower edge 2.25 cm back."""
     R = fingers_down(R_tool)
     if not np.any(facing):
         return R
     x = np.array([facing[0], facing[1], 0.0])
     if x @ R[:, 0] < 0:
         x = -x
-    z = _DOWN
+    if tilt == 0.0:
+        z = _DOWN
+        return np.column_stack([x, np.cross(z, x), z])
+    toward = -np.array([facing[0], facing[1], 0.0]) / np.linalg.norm(facing)
+    z = np.cos(tilt) * _DOWN + np.sin(tilt) * toward
+    x = x - (x @ z) * z
+    x /= np.linalg.norm(x)
     return np.column_stack([x, np.cross(z, x), z])
 
 
@@ -132,6 +144,7 @@ class PrimitivePlanner:
 
     def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig):
         self.cfg, self.controller = cfg, controller
+        self._tilt = np.deg2rad(cfg.finger_tilt_deg)
         self._gains = np.concatenate([np.full(NUM_JOINTS, cfg.stiffness),
                                       np.full(NUM_JOINTS, cfg.damping)])
 
@@ -156,7 +169,8 @@ class PrimitivePlanner:
         m[_COUNT] += 1
         m[_REACHED], m[_LOCATION] = -1.0, primitive[PRIMITIVE_LOCATION]
         m[_PRE] = pre
-        m[_PUSH] = np.clip(primitive[PRIMITIVE_MOTION], -1.0, 1.0) * cfg.push_distance
+        m[_PUSH] = np.clip(primitive[PRIMITIVE_MOTION], -1.0, 1.0) * cfg.push_distance * \
+            np.array([1.0, 1.0, cfg.vertical_push])
         m[_Z_SAFE] = max(top_z, pre[2]) + cfg.clearance
         normal = np.asarray(primitive[PRIMITIVE_NORMAL], float)
         horizontal = np.linalg.norm(normal[:2])
@@ -182,7 +196,7 @@ class PrimitivePlanner:
         # Transitions that depend on where the tool is now (checked before commanding).
         if m[_PHASE] == APPROACH:
             above = np.array([m[_PRE][0], m[_PRE][1], m[_Z_SAFE]])
-            turned = RotationMatrix(facing_rotation(tool_R, m[_FACING]) @ tool_R.T
+            turned = RotationMatrix(facing_rotation(tool_R, m[_FACING], self._tilt) @ tool_R.T
                                     ).ToAngleAxis().angle() < cfg.turn_tolerance
             if tool_p[2] >= m[_Z_SAFE] - tol and np.linalg.norm(tool_p[:2] - above[:2]) < tol \
                     and turned:
@@ -232,7 +246,8 @@ class PrimitivePlanner:
         action = np.zeros(ACTION_DIM)
         move = (target - tool_p) / ctrl.max_position_delta
         action[ACTION_SLICES["position"]] = move / max(1.0, np.abs(move).max())
-        rotvec = RotationMatrix(facing_rotation(tool_R, facing) @ tool_R.T).ToAngleAxis()
+        held = facing_rotation(tool_R, facing, self._tilt)
+        rotvec = RotationMatrix(held @ tool_R.T).ToAngleAxis()
         turn = rotvec.axis() * rotvec.angle() / ctrl.max_rotation_delta
         action[ACTION_SLICES["rotation"]] = turn / max(1.0, np.abs(turn).max())
         action[ACTION_SLICES["kp"]] = self._gains[:NUM_JOINTS]

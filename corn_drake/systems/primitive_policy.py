@@ -25,6 +25,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from corn_drake.contract import POSITION_DIM
 from corn_drake.contract import PRIMITIVE_CHOICE_DIM as CHOICE_DIM
+from corn_drake.systems.low_push import push_contact
 from corn_drake.systems.observations import ObservationLayout
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM,
                                                    STATUS_LAYOUT, make_primitive)
@@ -75,8 +76,9 @@ class PrimitivePolicySystem(LeafSystem):
     def _calc_choice(self, context, value):
         obs = self.observation(context)
         choice = self._agent.choose(obs)
-        choice["point_xyz"] = obs["cloud"][choice["point"]].astype(float)
-        choice["normal"] = obs["normals"][choice["point"]].astype(float)
+        # Where the push aims (the chosen point, or lowered: systems/low_push.py).
+        choice["point_xyz"], choice["normal"] = push_contact(
+            obs["cloud"], obs["normals"], choice["point"], self._agent.primitive_config)
         value.set_value(choice)
 
     def _calc_primitive(self, context, output: BasicVector):
