@@ -98,6 +98,27 @@ def test_leaning_fingers_point_down_and_toward_the_surface_with_the_narrow_side_
     np.testing.assert_allclose(facing_rotation(np.eye(3), facing, 0.0)[:, 2], [0, 0, -1])
 
 
+def test_the_fingers_lean_only_where_the_object_reaches_the_palm():
+    """A side contact on an object whose top is above the palm's lower edge at the pre-contact
+    point leans the fingers; a flat one (a book) keeps them vertical, whose lowest corners would
+    otherwise come within millimetres of the table."""
+    from corn_drake.config.scene import ControllerConfig
+    from corn_drake.systems.primitive_executor import (_LEAN, PALM_ABOVE_TOOL, PrimitivePlanner,
+                                                       facing_rotation, make_primitive)
+
+    cfg = PrimitiveConfig(push_height=0.02, finger_tilt_deg=30)
+    planner = PrimitivePlanner(cfg, ControllerConfig())
+    point, normal = np.array([0.0, 0.0, TABLE_TOP_Z + 0.02]), np.array([1.0, 0.0, 0.0])
+    primitive = make_primitive(point, normal, [-1.0, 0.0, 0.0], 0, 1)
+    tool_p, tool_R = np.array([0.0, 0.0, TABLE_TOP_Z + 0.3]), facing_rotation(np.eye(3), [0, 0])
+    pre_z = point[2]  # a horizontal normal: the pre-contact point is as high as the point
+    for top_z, lean in ((pre_z + PALM_ABOVE_TOOL + 0.03, np.deg2rad(30)),
+                        (pre_z + PALM_ABOVE_TOOL - 0.01, 0.0)):
+        memory, _ = planner.plan(planner.initial_memory(), tool_p, tool_R, top_z,
+                                 lambda: primitive)
+        assert memory[_LEAN] == pytest.approx(lean)
+
+
 def test_push_height_is_range_checked():
     from corn_drake.config.bounds import check_bounds
     from corn_drake.errors import InputError

@@ -93,7 +93,8 @@ class PrimitiveConfig:
     # For a side contact the fingers lean this far (degrees) from vertical toward the surface,
     # the palm away from it (systems/primitive_executor.facing_rotation: with vertical fingers
     # the palm, 2.1 cm deeper than they are, meets a tall object first, 4.5-10 cm above the
-    # tool point, and the push tips it). 0: vertical fingers.
+    # tool point, and the push tips it). Only where the object's top reaches the palm's lower
+    # edge at the pre-contact point (flat objects keep vertical fingers). 0: vertical fingers.
     finger_tilt_deg: float = 0.0
 
 

@@ -5,7 +5,7 @@ learner puts the agent's weights into Ray's object store once (every worker read
 copy), and sends each worker its columns of the update's unit noise; the worker runs batched
 inference over its envs and steps them for the whole segment (rl/segments.py), and returns the
 segment. So a worker pays one round trip per update instead of one per env step (the lock-step
-RayEnvBatch, rl/ray_workers.py, which the DAgger student and the primitive trainer still use),
+RayEnvBatch, rl/ray_workers.py, which the DAgger student still uses),
 and the learner runs no per-step inference at all.
 
 PPO stays on-policy: a segment carries the update whose weights it acted with, and the learner

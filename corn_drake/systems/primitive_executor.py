@@ -70,7 +70,14 @@ _Z_SAFE = 12
 _ANCHOR = slice(13, 16)  # where the retreat started
 _TARGET = slice(16, 19)  # the last commanded target
 _FACING = slice(19, 21)  # the contact normal's horizontal direction (zeros: a top contact)
-_MEMORY_SIZE = 21
+_LEAN = 21  # the fingers' lean toward the surface for this primitive (rad; facing_rotation)
+_MEMORY_SIZE = 22
+
+# The palm's lower edge (the finger knuckles) is this far above the tool point: an object whose
+# top is lower than that at the pre-contact point cannot meet the palm, and the fingers stay
+# vertical for it (leaning, their lower corners come within ~2 mm of the table at the lowest
+# pre-contact points: a flat book or plate was then never reached).
+PALM_ABOVE_TOOL = 0.045
 
 
 _DOWN = np.array([0.0, 0.0, -1.0])
@@ -174,6 +181,7 @@ class PrimitivePlanner:
         m[_Z_SAFE] = max(top_z, pre[2]) + cfg.clearance
         normal = np.asarray(primitive[PRIMITIVE_NORMAL], float)
         horizontal = np.linalg.norm(normal[:2])
+        m[_LEAN] = self._tilt if top_z > pre[2] + PALM_ABOVE_TOOL else 0.0
         m[_FACING] = normal[:2] / horizontal if horizontal > 0.3 * np.linalg.norm(normal) \
             else 0.0
         if not reachable_from_above(primitive[PRIMITIVE_POINT][2],
@@ -196,7 +204,7 @@ class PrimitivePlanner:
         # Transitions that depend on where the tool is now (checked before commanding).
         if m[_PHASE] == APPROACH:
             above = np.array([m[_PRE][0], m[_PRE][1], m[_Z_SAFE]])
-            turned = RotationMatrix(facing_rotation(tool_R, m[_FACING], self._tilt) @ tool_R.T
+            turned = RotationMatrix(facing_rotation(tool_R, m[_FACING], m[_LEAN]) @ tool_R.T
                                     ).ToAngleAxis().angle() < cfg.turn_tolerance
             if tool_p[2] >= m[_Z_SAFE] - tol and np.linalg.norm(tool_p[:2] - above[:2]) < tol \
                     and turned:
@@ -228,7 +236,7 @@ class PrimitivePlanner:
         target[2] = max(target[2], TABLE_TOP_Z + cfg.min_tool_height)
         m[_TARGET] = target
         action = self._action(target, tool_p, tool_R,
-                              m[_FACING] if phase != IDLE else np.zeros(2))
+                              m[_FACING] if phase != IDLE else np.zeros(2), m[_LEAN])
         # Count this tick; phases with a fixed length move on after their last command, so the
         # memory after a primitive's last retreat tick already says idle (the env stops there).
         m[_TICKS] += 1
@@ -241,12 +249,12 @@ class PrimitivePlanner:
         return m, action
 
     def _action(self, target: np.ndarray, tool_p: np.ndarray, tool_R: np.ndarray,
-                facing: np.ndarray) -> np.ndarray:
+                facing: np.ndarray, lean: float) -> np.ndarray:
         ctrl = self.controller
         action = np.zeros(ACTION_DIM)
         move = (target - tool_p) / ctrl.max_position_delta
         action[ACTION_SLICES["position"]] = move / max(1.0, np.abs(move).max())
-        held = facing_rotation(tool_R, facing, self._tilt)
+        held = facing_rotation(tool_R, facing, lean)
         rotvec = RotationMatrix(held @ tool_R.T).ToAngleAxis()
         turn = rotvec.axis() * rotvec.angle() / ctrl.max_rotation_delta
         action[ACTION_SLICES["rotation"]] = turn / max(1.0, np.abs(turn).max())
