@@ -333,3 +333,29 @@ def test_a_state_with_no_usable_location_keeps_all_of_them():
     state = _masked_state(rng, np.zeros(L, np.float32))
     batch = {k: torch.as_tensor(v)[None] for k, v in state.items()}
     assert torch.isfinite(learner.scores(batch)).all()
+
+
+def test_the_actor_waits_for_its_warmup_while_the_critic_learns():
+    """actor_warmup=6 with policy_delay 2: the actor is untouched through update 6 (the critic
+    moves from the first), and steps at update 8, the first delayed step after the warm-up."""
+    learner = _learner(seed=5, settings=TD3Settings(policy_delay=2, actor_warmup=6))
+    buffer, rng = _filled_buffer(seed=5), np.random.default_rng(5)
+    actor0 = copy.deepcopy(learner.actor.state_dict())
+    critic0 = copy.deepcopy(learner.critic.state_dict())
+
+    def moved(state, before) -> bool:
+        return any(not torch.equal(state[k], before[k]) for k in before)
+
+    for _ in range(6):
+        learner.update(buffer.sample(16, rng))
+    assert not moved(learner.actor.state_dict(), actor0)
+    assert moved(learner.critic.state_dict(), critic0)
+    learner.update(buffer.sample(16, rng))  # update 7: not a delayed step
+    assert not moved(learner.actor.state_dict(), actor0)
+    learner.update(buffer.sample(16, rng))  # update 8
+    assert moved(learner.actor.state_dict(), actor0)
+
+
+def test_a_negative_actor_warmup_is_refused():
+    with pytest.raises(ValueError, match="actor_warmup"):
+        TD3Settings(actor_warmup=-1)

@@ -111,7 +111,7 @@ def test_a_run_with_ray_workers_trains_checkpoints_and_resumes(tmp_path, local_r
     run = tmp_path / "run"
     trainer = _trainer(run, workers=2, steps=8)
     metrics = trainer.train(progress=False)
-    assert metrics["global_step"] == 8 and metrics["worker_restarts"] == 0
+    assert metrics["global_step"] == 8 and metrics["final"]["worker_restarts"] == 0
     assert len(trainer.replay) == 8
     assert trainer.learner.updates > 0  # learning_starts 4: updates once the replay holds 4
     assert [row["step"] for row in metrics["history"]] == [4, 8]

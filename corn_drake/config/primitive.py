@@ -107,7 +107,8 @@ class PrimitiveTrainConfig(RunSettings):
               "batch_size": ">= 1", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
               "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
-              "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1"}
+              "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1",
+              "actor_warmup": ">= 0"}
     policy: str = "primitive"
     # Candidate contact locations: "patch", the encoder's 16 patch centres (each a cloud point)
     # with their tokens (config/choices.py PRIMITIVE_LOCATIONS says why not every point yet).
@@ -124,6 +125,9 @@ class PrimitiveTrainConfig(RunSettings):
     actor_lr: float = 3e-4
     critic_lr: float = 3e-4
     policy_delay: int = 2
+    # TD3 updates of this run before its actor's first step (rl/td3.TD3Settings.actor_warmup):
+    # for a run started --init-from another task's policy, whose critic must re-fit first.
+    actor_warmup: int = 0
     target_noise: float = 0.2
     target_noise_clip: float = 0.5
     # Exploration: locations sampled from softmax(score / temperature), motions + N(0, noise).

@@ -16,7 +16,6 @@ and random stream, one round per loop, exactly as the trainer always did; Ray wo
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -47,9 +46,7 @@ class PrimitiveTransitions:
     terminated: np.ndarray  # (N,) bool: no bootstrap (success, out of workspace)
     next_features: dict[str, np.ndarray]  # the state each led to (an ended episode's last one)
     episode_stats: list[dict[str, Any]]
-    sim_errors: int
     version: int  # the learner's weights version the choices were made with
-    seconds: dict[str, float]  # the collector's own: env stepping, choosing, the whole collect
 
     def __len__(self) -> int:
         return int(self.locations.shape[0])
@@ -79,10 +76,8 @@ class PrimitiveCollector:
         self.select = select or (lambda features, **kw: select_primitives(
             agent.scores_and_motions(features), **kw))
         self.version = -1
-        self._obs = self._features = self._candidates = None
-
-    def __len__(self) -> int:
-        return len(self.envs)
+        # The envs' current observation as the policy sees it (None before the first reset).
+        self._features = self._candidates = None
 
     def set_weights(self, state: dict, version: int) -> None:
         """The learner's actor and critic after update `version` (network_state())."""
@@ -91,18 +86,14 @@ class PrimitiveCollector:
             self.version = version
 
     def _start(self) -> None:
-        if self._obs is None:
-            self._obs = self.envs.reset()
-            self._features, self._candidates = self.agent.features(self._obs)
+        if self._features is None:
+            self._features, self._candidates = self.agent.features(self.envs.reset())
 
     def collect(self, rounds: int, exploration: Exploration,
                 rng: np.random.Generator) -> PrimitiveTransitions:
         self._start()
-        t0 = time.perf_counter()
-        seconds = {"env": 0.0, "choose": 0.0}
-        parts, stats, sim_errors = [], [], 0
+        parts, stats = [], []
         for _ in range(rounds):
-            t = time.perf_counter()
             features, candidates = self._features, self._candidates
             if exploration.random:
                 locations, motions = uniform_choices(features, rng)
@@ -112,11 +103,7 @@ class PrimitiveCollector:
                     motion_noise=exploration.motion_noise, rng=rng)
             points = candidates.numpy()[np.arange(len(locations)), np.asarray(locations)]
             actions = [{"point": int(p), "motion": m} for p, m in zip(points, motions)]
-            seconds["choose"] += time.perf_counter() - t
-            t = time.perf_counter()
             step = self.envs.step(actions)
-            seconds["env"] += time.perf_counter() - t
-            t = time.perf_counter()
             next_features, next_candidates = self.agent.features(step.obs)
             target = {k: v.clone() for k, v in next_features.items()}
             if step.final_obs:  # an ended episode's transition leads to its last observation
@@ -126,15 +113,11 @@ class PrimitiveCollector:
                      for k in step.final_obs[ended[0]]})
                 for key in target:
                     target[key][ended] = final[key]
-            seconds["choose"] += time.perf_counter() - t
             parts.append((_numpy(features), np.asarray(locations), motions,
                           np.asarray(step.rewards), np.asarray(step.terminated),
                           _numpy(target)))
             stats.extend(step.episode_stats)
-            sim_errors += step.sim_errors
-            self._obs, self._features, self._candidates = step.obs, next_features, \
-                next_candidates
-        seconds["total"] = time.perf_counter() - t0
+            self._features, self._candidates = next_features, next_candidates
 
         def cat(i, key=None):
             arrays = [p[i] if key is None else p[i][key] for p in parts]
@@ -143,4 +126,4 @@ class PrimitiveCollector:
         return PrimitiveTransitions(
             features={k: cat(0, k) for k in parts[0][0]}, locations=cat(1), motions=cat(2),
             rewards=cat(3), terminated=cat(4), next_features={k: cat(5, k) for k in parts[0][5]},
-            episode_stats=stats, sim_errors=sim_errors, version=self.version, seconds=seconds)
+            episode_stats=stats, version=self.version)

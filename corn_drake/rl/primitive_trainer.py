@@ -48,7 +48,7 @@ def td3_settings(cfg: PrimitiveTrainConfig) -> TD3Settings:
     return TD3Settings(gamma=cfg.gamma, tau=cfg.tau, actor_lr=cfg.actor_lr,
                        critic_lr=cfg.critic_lr, policy_delay=cfg.policy_delay,
                        target_noise=cfg.target_noise, target_noise_clip=cfg.target_noise_clip,
-                       batch_size=cfg.batch_size)
+                       batch_size=cfg.batch_size, actor_warmup=cfg.actor_warmup)
 
 
 class PrimitiveTrainer:
@@ -83,11 +83,6 @@ class PrimitiveTrainer:
 
             self.collector = PrimitiveCollector(EnvBatch(factory, cfg.envs_per_worker),
                                                 self.agent, self.learner.select)
-
-    @property
-    def envs(self):
-        """The in-process env batch (None when Ray workers hold the envs)."""
-        return self.collector.envs if self.collector is not None else None
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -156,8 +151,8 @@ class PrimitiveTrainer:
             while True:
                 yield self._round()
         workers, submitted = self.workers, self.global_step
+        workers.publish(self.agent, self.learner.updates)
         for w in workers.idle_workers():
-            workers.publish(self.agent, self.learner.updates)
             workers.submit(w, 1, self._exploration(submitted))
             submitted += workers.envs_per_worker
         while True:
@@ -217,8 +212,6 @@ class PrimitiveTrainer:
         metrics = {"policy": cfg.policy, "global_step": self.global_step,
                    "episodes": self.episodes, "final": self.history[-1] if self.history else {},
                    "history": self.history}
-        if self.workers is not None:
-            metrics["worker_restarts"] = self.workers.restarts
         write_json(self.out / "metrics.json", metrics)
         if self.history:
             plot_learning_curves({cfg.policy: self.history},
@@ -234,6 +227,8 @@ class PrimitiveTrainer:
                "episode_length": recent_mean(recent, "length"),
                "primitives_per_s": window["primitives"] / max(elapsed, 1e-9),
                "replay": len(self.replay), "updates": self.learner.updates}
+        if self.workers is not None:  # as the PPO trainer's rows
+            row["worker_restarts"] = self.workers.restarts
         for key in ("critic_loss", "actor_loss", "q_mean"):
             values = [x[key] for x in losses if np.isfinite(x.get(key, np.nan))]
             row[key] = float(np.mean(values)) if values else None

@@ -85,9 +85,6 @@ class RayPrimitiveCollectors:
         return PrimitiveWorker.options(num_cpus=0).remote(
             self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent, seed)
 
-    def __len__(self) -> int:
-        return len(self.workers) * self.envs_per_worker
-
     def publish(self, agent, version: int) -> None:
         """Puts `agent`'s actor and critic (after update `version`) into the object store, once
         per version; the requests sent after this act with them."""

@@ -118,6 +118,10 @@ class TD3Settings:
     batch_size: int = 64  # what the caller samples from the replay per update
     # Max global gradient norm per network; a bootstrap target can spike early in training.
     grad_clip: float = 10.0
+    # Critic updates before the actor's first step (the targets still track): a run that starts
+    # from another task's actor and critic keeps that actor while the critic re-fits the new
+    # task's rewards, instead of following a critic still fitted to the old ones.
+    actor_warmup: int = 0
 
     def __post_init__(self) -> None:
         checks = {
@@ -130,6 +134,7 @@ class TD3Settings:
             "target_noise_clip": self.target_noise_clip >= 0,
             "batch_size": isinstance(self.batch_size, int) and self.batch_size >= 1,
             "grad_clip": self.grad_clip > 0,
+            "actor_warmup": isinstance(self.actor_warmup, int) and self.actor_warmup >= 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -261,7 +266,8 @@ class TD3Learner:
         self.updates += 1
 
         if self.updates % s.policy_delay == 0:
-            self._last_actor_loss = self._actor_step(features)
+            if self.updates > s.actor_warmup:
+                self._last_actor_loss = self._actor_step(features)
             self._soft_update(self.actor_target, self.actor)
             self._soft_update(self.critic_target, self.critic)
 

@@ -4,8 +4,11 @@ toward the table (PrimitiveConfig.push_height).
 Why: a horizontal push at height h on an object standing on a base of half-width b (along the
 push) tips it rather than slides it once mu * h > b, mu being the table's friction (0.3-0.8
 here). The encoder's patch centres on an upright bottle or a tall box sit at mid-height, 5-10 cm
-up, where a push topples it; most failed push_turn episodes ended tipped or rolled
-(docs/results/primitive/). Pushing the same side 2 cm above the table slides it instead.
+up; most failed push_turn episodes ended tipped or rolled (docs/results/primitive/). Lowering
+the fingers alone does not lower the push on a tall object: the palm, deeper than the fingers,
+meets it first, 4.5 cm and more above the tool point (an upright 5 x 5 x 10 cm box tipped
+either way). With the fingers leaning toward the surface as well (finger_tilt_deg,
+systems/primitive_executor.facing_rotation) the same push slid it upright.
 
 The lowering keeps the contact's horizontal position and only moves the pre-contact point down,
 and only as far as the object's cloud leaves room: the fingers descend through a vertical

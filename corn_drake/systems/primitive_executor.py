@@ -110,7 +110,7 @@ def facing_rotation(R_tool: np.ndarray, facing: np.ndarray, tilt: float = 0.0) -
     x = np.array([facing[0], facing[1], 0.0])
     if x @ R[:, 0] < 0:
         x = -x
-    if tilt == 0.0:
+    if tilt == 0.0:  # the rotation as it always was, bit for bit (shipped cards replay)
         z = _DOWN
         return np.column_stack([x, np.cross(z, x), z])
     toward = -np.array([facing[0], facing[1], 0.0]) / np.linalg.norm(facing)
