@@ -185,6 +185,29 @@ def test_tipping_ends_a_face_keeping_training_episode_with_the_penalty():
     assert penalised == pytest.approx(free - 1.5, abs=1e-6)
 
 
+def test_the_turn_reward_adds_the_rotation_closed_toward_the_goal():
+    """The same deterministic primitive on push_turn with turn_reward 0 and 2: the rewards
+    differ by 2 x (the rotation to the goal before - after), and the object did turn."""
+    from corn_drake.config.primitive import PrimitiveConfig
+
+    results = []
+    for weight in (0.0, 2.0):
+        env = PrimitiveEnv(load_primitive_env_config("push_turn"),
+                           PrimitiveConfig(turn_reward=weight))
+        obs, _ = env.reset(seed=2)
+        before = env.rotation_to_goal()
+        index = _side_point(env, obs)
+        # An off-centre push turns the box: along the surface and inward.
+        normal = obs["normals"][index]
+        motion = 0.6 * _inward(normal) + 0.6 * np.array([-normal[1], normal[0], 0.0])
+        _, reward, _, _, _ = env.step({"point": index, "motion": motion})
+        results.append((reward, before, env.rotation_to_goal()))
+    (plain, before, after), (weighted, before2, after2) = results
+    assert (before, after) == pytest.approx((before2, after2), abs=1e-9)
+    assert abs(after - before) > 0.01
+    assert weighted - plain == pytest.approx(2.0 * (before - after), abs=1e-6)
+
+
 def test_tipping_is_no_failure_on_the_6d_task_whose_goals_change_the_face():
     _, _, end, _, info = _tipped_goal_step("full6d", 1.5)
     assert not end and "tipped" not in info

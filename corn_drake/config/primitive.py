@@ -29,7 +29,8 @@ class PrimitiveConfig:
               "approach_steps": ">= 1",
               "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
               "progress_reward": ">= 0", "tip_penalty": ">= 0", "push_height": ">= 0",
-              "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]"}
+              "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]",
+              "turn_reward": ">= 0"}
     # The tool point stops this far off the surface along the normal before the push. The
     # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
     pre_contact_distance: float = 0.04
@@ -70,6 +71,11 @@ class PrimitiveConfig:
     # paper's own scale (k1 0.302 x 1.2 per metre, 0.02 for 5 cm) is drowned by the success
     # bonus over a 10-primitive episode.
     progress_reward: float = 10.0
+    # Plus this times how much the primitive closed the object's rotation to its goal (rad).
+    # Why: the keypoint progress is mostly translation (a 0.6 rad turn moves a 10 cm object's
+    # box corners ~3 cm, a push goal 8-12 cm), and a critic fitted to it on push_turn chose
+    # the locations that translate (docs/results/primitive/, item 11). 0: keypoints only.
+    turn_reward: float = 0.0
     # On tasks whose goal keeps the object's face (push, push_turn; tasks/faces.py), a
     # primitive that leaves the object on another face (tipped or rolled) ends the training
     # episode with this negative reward; 0 turns the rule off. Why: the keypoint progress alone

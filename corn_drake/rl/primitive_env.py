@@ -8,7 +8,8 @@ the policy clock period after period (each the teacher env's step: 8 physics ste
 executor is idle again, the task succeeds, the object leaves the workspace, the simulation
 fails, or the task's episode_steps run out. The reward is PrimitiveConfig.progress_reward times
 how much the primitive closed the mean distance between the object's bounding-box keypoints and
-the goal's (the paper's keypoints: position and the full 3-D orientation), plus the task's
+the goal's (the paper's keypoints: position and the full 3-D orientation), plus turn_reward
+times how much it closed the rotation to the goal (rad; 0 by default), plus the task's
 success_reward on success; info["task_reward"] keeps the teacher's per-period rewards summed.
 
 Episode end: success, out of workspace, or (with PrimitiveConfig.tip_penalty on a task whose goal
@@ -137,7 +138,7 @@ class PrimitiveEnv(DiagramEnv):
         aim, normal = push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
         primitive = make_primitive(aim, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
-        distance_before = self.keypoint_distance()
+        distance_before, turn_before = self.keypoint_distance(), self.rotation_to_goal()
         total, ticks = 0.0, 0
         while True:
             obs, reward, terminated, truncated, info = super().step(None)
@@ -158,6 +159,8 @@ class PrimitiveEnv(DiagramEnv):
         info.update({"ticks": ticks, "reached": bool(status[STATUS_LAYOUT["reached"]] > 0),
                      "primitive": primitive, "task_reward": total})
         reward = self.primitive_cfg.progress_reward * (distance_before - self.keypoint_distance())
+        if self.primitive_cfg.turn_reward:
+            reward += self.primitive_cfg.turn_reward * (turn_before - self.rotation_to_goal())
         if info["status"]["success"] > 0:
             reward += self.cfg.task.success_reward
         elif not terminated and self._tipped():
@@ -171,6 +174,13 @@ class PrimitiveEnv(DiagramEnv):
         the task's goal keeps the face, and the object now rests on another one."""
         return self.primitive_cfg.tip_penalty > 0 and goal_keeps_face(self.cfg.task) and \
             face_error(self.object_pose(), self.episode.goal_pose) > TIPPED_ANGLE_RAD
+
+    def rotation_to_goal(self) -> float:
+        """The angle (rad) of the rotation between the object's orientation and the goal's."""
+        from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
+
+        pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
+        return rotation_angle(quat_wxyz_to_matrix(goal[3:]).T @ quat_wxyz_to_matrix(pose[3:]))
 
     def keypoint_distance(self) -> float:
         """Mean distance (m) between the object's bounding-box keypoints now and at the goal
