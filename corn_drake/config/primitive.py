@@ -75,6 +75,8 @@ class PrimitiveConfig:
     # Why: the keypoint progress is mostly translation (a 0.6 rad turn moves a 10 cm object's
     # box corners ~3 cm, a push goal 8-12 cm), and a critic fitted to it on push_turn chose
     # the locations that translate (docs/results/primitive/, item 11). 0: keypoints only.
+    # Measured with 2.0 on push_turn from the push policy: it learned not to touch the object
+    # (greedy success 0.010 against 0.185; item 12), hence off by default.
     turn_reward: float = 0.0
     # On tasks whose goal keeps the object's face (push, push_turn; tasks/faces.py), a
     # primitive that leaves the object on another face (tipped or rolled) ends the training
