@@ -176,11 +176,14 @@ class PrimitiveEnv(DiagramEnv):
             face_error(self.object_pose(), self.episode.goal_pose) > TIPPED_ANGLE_RAD
 
     def rotation_to_goal(self) -> float:
-        """The angle (rad) of the rotation between the object's orientation and the goal's."""
-        from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
+        """The angle (rad) of the rotation between the object's orientation and the goal's: the
+        task's own orientation error (systems/reward.pose_errors)."""
+        from corn_drake.systems.reward import pose_errors
+        from corn_drake.transforms import quat_wxyz_to_matrix
 
         pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
-        return rotation_angle(quat_wxyz_to_matrix(goal[3:]).T @ quat_wxyz_to_matrix(pose[3:]))
+        return pose_errors(pose[:3], quat_wxyz_to_matrix(pose[3:]), goal[:3],
+                           quat_wxyz_to_matrix(goal[3:]))[1]
 
     def keypoint_distance(self) -> float:
         """Mean distance (m) between the object's bounding-box keypoints now and at the goal

@@ -75,7 +75,7 @@ class RayPrimitiveCollectors:
         self.workers = [self._spawn(w) for w in range(num_workers)]
         self.restarts = 0
         self.version, self._weights = None, None
-        self._pending: dict = {}  # future -> worker index
+        self._pending: dict = {}  # future -> (worker index, rounds, exploration): to resend
         self._replaced_in_a_row = 0
 
     def _spawn(self, w: int):
