@@ -116,7 +116,7 @@ class PrimitiveTrainConfig(RunSettings):
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
               "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
               "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1",
-              "actor_warmup": ">= 0"}
+              "actor_warmup": ">= 0", "hindsight_goals": ">= 0"}
     policy: str = "primitive"
     # Candidate contact locations: "patch", the encoder's 16 patch centres (each a cloud point)
     # with their tokens (config/choices.py PRIMITIVE_LOCATIONS says why not every point yet).
@@ -141,6 +141,10 @@ class PrimitiveTrainConfig(RunSettings):
     # Exploration: locations sampled from softmax(score / temperature), motions + N(0, noise).
     temperature: float = 0.1
     motion_noise: float = 0.3
+    # Hindsight goals (rl/hindsight.py, HER's "future" strategy): each finished episode's
+    # transitions are stored this many more times, each with a goal the episode reached later,
+    # so primitives that turned the object somewhere teach turning. 0: off.
+    hindsight_goals: int = 0
     # The first primitives choose uniformly random locations and motions (fills the replay).
     random_steps: int = 512
     hidden: int = 256
@@ -161,4 +165,8 @@ class PrimitiveTrainConfig(RunSettings):
                              f"{self.locations!r}")
         if self.policy != "primitive":
             raise InputError(f"a primitive run's policy must be 'primitive', got {self.policy!r}")
+        if self.hindsight_goals and self.primitive.tip_penalty > 0:
+            raise InputError(f"hindsight_goals ({self.hindsight_goals}) and primitive.tip_penalty "
+                             f"({self.primitive.tip_penalty}) do not go together: relabelled "
+                             f"goals do not apply the tipping rule (rl/hindsight.py)")
         self.env.check()

@@ -16,18 +16,45 @@ Positions and flows are in decimetres (x 10) so they sit near unit scale beside 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
-
 
 from corn_drake.nn.geometry import matrix_from_rot6d
 from corn_drake.nn.patchify import gather_points, patch_indices
 
 POSITION_SCALE = 10.0  # metres -> decimetres
 LOCATION_KINDS = ("patch", "point")
+# Where the goal sits in the features (location_features' layout): the rest does not depend on it.
+_GLOBAL_GOAL = slice(0, 9)  # relative goal position (x POSITION_SCALE), then its 6D rotation
+_LOCAL_REL = slice(0, 3)  # the location relative to the object's origin (x POSITION_SCALE)
+_LOCAL_FLOW = slice(3, 6)  # its goal flow (x POSITION_SCALE)
 
 
 def global_dim(token_dim: int) -> int:
     return 3 + 6 + 3 + 6 + token_dim
+
+
+def _flow(rel, goal_position, goal_rotation):
+    """Where the relative goal (position (B, 3), rotation (B, 3, 3)) puts each location
+    (rel (B, L, 3), relative to the object's origin), minus where it is; numpy or torch."""
+    return rel @ goal_rotation.swapaxes(-1, -2) + goal_position[:, None, :] - rel
+
+
+def with_goal(features: dict[str, np.ndarray], goal_position: np.ndarray,
+              goal_rotation: np.ndarray) -> dict[str, np.ndarray]:
+    """The same states' features (numpy, batched, as location_features makes them) with another
+    goal: `goal_position` (B, 3) the goal's position minus the object's (m, world frame) and
+    `goal_rotation` (B, 3, 3) the goal's orientation times the object's transposed, as the
+    observation's `goal` holds them. Tokens, locations, normals, the hand and the mask do not
+    depend on the goal, so hindsight goals (rl/hindsight.py) need no encoder pass."""
+    out = {k: np.array(v, copy=True) for k, v in features.items()}
+    goal_position = np.asarray(goal_position, np.float64)
+    goal_rotation = np.asarray(goal_rotation, np.float64)
+    rel = out["local"][..., _LOCAL_REL].astype(np.float64) / POSITION_SCALE
+    out["local"][..., _LOCAL_FLOW] = _flow(rel, goal_position, goal_rotation) * POSITION_SCALE
+    out["global"][:, _GLOBAL_GOAL] = np.concatenate(
+        [goal_position * POSITION_SCALE, goal_rotation[:, :, 0], goal_rotation[:, :, 1]], -1)
+    return out
 
 
 def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "patch"
@@ -58,7 +85,7 @@ def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "p
                                   nearest.unsqueeze(-1).expand(-1, -1, patch_tokens.shape[-1]))
     R_rel = matrix_from_rot6d(goal[:, 3:9])  # goal rotation relative to the object's
     rel = points - p_obj.unsqueeze(1)
-    flow = rel @ R_rel.transpose(1, 2) + goal[:, None, :3] - rel
+    flow = _flow(rel, goal[:, :3], R_rel)
     local = torch.cat([rel * POSITION_SCALE, flow * POSITION_SCALE, loc_normals], -1)
     context = torch.cat([goal[:, :3] * POSITION_SCALE, goal[:, 3:9],
                          (hand[:, :3] - p_obj) * POSITION_SCALE, hand[:, 3:9], hand_token], -1)

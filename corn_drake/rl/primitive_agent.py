@@ -81,16 +81,13 @@ class PrimitiveAgent(nn.Module):
         nz = gather_points(batch["normals"], candidates)[..., 2]  # unit normals
         return reachable_from_above(z, nz, self.primitive_config).float()
 
-    @torch.no_grad()
     def scores_and_motions(self, features: dict[str, torch.Tensor]
                            ) -> tuple[torch.Tensor, torch.Tensor]:
         """(per-location scores, -inf where features["mask"] rules a location out; the actor's
-        motions)."""
-        from corn_drake.rl.td3 import masked
+        motions): rl/td3.scores_and_motions with this agent's networks."""
+        from corn_drake.rl.td3 import scores_and_motions
 
-        motions = self.actor(features)
-        q1, _ = self.critic(features, motions)
-        return masked(q1, features), motions
+        return scores_and_motions(self.actor, self.critic, features)
 
     def choose(self, obs: dict[str, np.ndarray]) -> dict:
         """The greedy choice for one observation: {"point" (cloud index), "motion" (3,),

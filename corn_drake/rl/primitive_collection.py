@@ -6,7 +6,9 @@ rounds — one primitive in every env per round, chosen while exploring (uniform
 during the run's first `random_steps` primitives, else rl/td3.select_primitives with the
 temperature and motion noise) — and returns PrimitiveTransitions: per-location features of each
 state and of the state it led to (the encoder runs once per observation, here, so the learner
-never runs it), the choices, rewards and ends, and the finished episodes' stats.
+never runs it), the choices, rewards and ends, and the finished episodes' stats. With a
+HindsightRule (rl/hindsight.py) each finished episode also comes back relabelled with goals it
+reached (`relabeled`), drawn from the same random stream.
 
 The trainer's in-process path (`--workers 0`) runs one collector with its own agent, learner
 and random stream, one round per loop, exactly as the trainer always did; Ray workers
@@ -22,6 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from corn_drake.rl.hindsight import HindsightEpisodes, HindsightRule, achieved_states
 from corn_drake.rl.td3 import choosable
 
 # select(features, greedy=..., temperature=..., motion_noise=..., rng=...) -> (locations,
@@ -47,6 +50,9 @@ class PrimitiveTransitions:
     next_features: dict[str, np.ndarray]  # the state each led to (an ended episode's last one)
     episode_stats: list[dict[str, Any]]
     version: int  # the learner's weights version the choices were made with
+    # Hindsight copies of the episodes that ended in these rounds (rl/hindsight.py): the same
+    # columns, not primitives of their own (the run's step counts only the ones above).
+    relabeled: PrimitiveTransitions | None = None
 
     def __len__(self) -> int:
         return int(self.locations.shape[0])
@@ -67,12 +73,15 @@ def uniform_choices(features, rng: np.random.Generator) -> tuple[np.ndarray, np.
 
 
 class PrimitiveCollector:
-    def __init__(self, envs, agent, select: Select | None = None):
+    def __init__(self, envs, agent, select: Select | None = None,
+                 hindsight: HindsightRule | None = None):
         """`envs`: an EnvBatch of PrimitiveEnvs; `agent`: a PrimitiveAgent (its encoder makes
-        the features); `select`: how the policy chooses (default: the agent's own networks)."""
+        the features); `select`: how the policy chooses (default: the agent's own networks);
+        `hindsight`: relabel finished episodes with goals they reached (None: off)."""
         from corn_drake.rl.td3 import select_primitives
 
         self.envs, self.agent = envs, agent
+        self.hindsight = None if hindsight is None else HindsightEpisodes(hindsight, len(envs))
         self.select = select or (lambda features, **kw: select_primitives(
             agent.scores_and_motions(features), **kw))
         self.version = -1
@@ -87,12 +96,39 @@ class PrimitiveCollector:
 
     def _start(self) -> None:
         if self._features is None:
-            self._features, self._candidates = self.agent.features(self.envs.reset())
+            obs = self.envs.reset()
+            self._features, self._candidates = self.agent.features(obs)
+            if self.hindsight is not None:
+                for slot, state in enumerate(achieved_states(obs)):
+                    self.hindsight.begin(slot, state)
+
+    def _keep_for_hindsight(self, step, features, locations, motions, target,
+                            rng: np.random.Generator) -> list[dict]:
+        """Adds this round's transitions to their episodes; returns the relabelled columns of
+        the episodes that ended (and begins the envs' new ones)."""
+        episodes, relabeled = self.hindsight, []
+        after = achieved_states(step.obs)
+        ended = sorted(step.final_obs)
+        finals = dict(zip(ended, achieved_states(
+            {k: np.stack([step.final_obs[i][k] for i in ended]) for k in
+             ("object_position", "goal", "object_keypoints")}))) if ended else {}
+        stats = dict(zip(ended, step.episode_stats))  # both in env order
+        for slot in range(len(locations)):
+            episodes.add(slot, {k: v[slot] for k, v in features.items()}, locations[slot],
+                         motions[slot], step.terminated[slot],
+                         {k: v[slot] for k, v in target.items()}, finals.get(slot, after[slot]))
+            if slot in finals:
+                columns = episodes.finish(slot, stats[slot]["success"] > 0,
+                                          not stats[slot]["sim_error"], rng)
+                if columns is not None:
+                    relabeled.append(columns)
+                episodes.begin(slot, after[slot])
+        return relabeled
 
     def collect(self, rounds: int, exploration: Exploration,
                 rng: np.random.Generator) -> PrimitiveTransitions:
         self._start()
-        parts, stats = [], []
+        parts, stats, relabeled = [], [], []
         for _ in range(rounds):
             features, candidates = self._features, self._candidates
             if exploration.random:
@@ -116,6 +152,9 @@ class PrimitiveCollector:
             parts.append((_numpy(features), np.asarray(locations), motions,
                           np.asarray(step.rewards), np.asarray(step.terminated),
                           _numpy(target)))
+            if self.hindsight is not None:
+                relabeled.extend(self._keep_for_hindsight(step, *parts[-1][:3], parts[-1][5],
+                                                          rng))
             stats.extend(step.episode_stats)
             self._features, self._candidates = next_features, next_candidates
 
@@ -126,4 +165,18 @@ class PrimitiveCollector:
         return PrimitiveTransitions(
             features={k: cat(0, k) for k in parts[0][0]}, locations=cat(1), motions=cat(2),
             rewards=cat(3), terminated=cat(4), next_features={k: cat(5, k) for k in parts[0][5]},
-            episode_stats=stats, version=self.version)
+            episode_stats=stats, version=self.version,
+            relabeled=_joined(relabeled, self.version) if relabeled else None)
+
+
+def _joined(columns: list[dict], version: int) -> PrimitiveTransitions:
+    """Relabelled episodes' columns (HindsightEpisodes.finish) as one PrimitiveTransitions."""
+    def cat(key: str, sub: str | None = None) -> np.ndarray:
+        return np.concatenate([c[key] if sub is None else c[key][sub] for c in columns])
+
+    return PrimitiveTransitions(
+        features={k: cat("features", k) for k in columns[0]["features"]},
+        locations=cat("locations"), motions=cat("motions"), rewards=cat("rewards"),
+        terminated=cat("terminated"),
+        next_features={k: cat("next_features", k) for k in columns[0]["next_features"]},
+        episode_stats=[], version=version)

@@ -7,6 +7,8 @@ runs once per observation, where the envs are), and the learner takes `updates_p
 steps per primitive collected (rl/td3.py), on `--device`.
 - In-process (`--workers 0`): one round (a primitive in every env) per loop, then its updates;
   a seed repeats a run exactly.
+With `hindsight_goals` > 0 the collectors also relabel every finished episode with goals it
+reached (rl/hindsight.py); those copies go into the replay too but are not counted as primitives.
 - Ray (`--workers N`): each worker steps its own envs with its own copy of the networks, one
   round per request, asynchronously: the learner updates while the workers step
   (rl/primitive_workers.py).
@@ -32,6 +34,7 @@ from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.errors import InputError
 from corn_drake.rl.device import training_device
+from corn_drake.rl.hindsight import HindsightRule
 from corn_drake.rl.primitive_agent import PrimitiveAgent
 from corn_drake.rl.primitive_collection import Exploration, PrimitiveTransitions
 from corn_drake.rl.replay import ReplayBuffer
@@ -66,6 +69,7 @@ class PrimitiveTrainer:
         self._load()
         if self.global_step == 0 and cfg.init_from:
             self._start_from(cfg.init_from)
+        hindsight = HindsightRule.for_run(cfg.hindsight_goals, cfg.primitive, cfg.env.task)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
                                   self.episodes // n_envs, cfg.primitive)
@@ -76,13 +80,14 @@ class PrimitiveTrainer:
 
             init_ray(cfg.ray_address or None)
             self.workers = RayPrimitiveCollectors(factory, cfg.workers, cfg.envs_per_worker,
-                                                  self.agent, cfg.seed, self.global_step)
+                                                  self.agent, cfg.seed, self.global_step,
+                                                  hindsight)
         else:
             from corn_drake.rl.primitive_collection import PrimitiveCollector
             from corn_drake.rl.vec_env import EnvBatch
 
             self.collector = PrimitiveCollector(EnvBatch(factory, cfg.envs_per_worker),
-                                                self.agent, self.learner.select)
+                                                self.agent, self.learner.select, hindsight)
 
     # --- checkpoints -------------------------------------------------------------------------
     def _save(self) -> None:
@@ -163,8 +168,10 @@ class PrimitiveTrainer:
             yield transitions
 
     def _store(self, t: PrimitiveTransitions) -> None:
-        self.replay.add_batch(t.features, t.locations, t.motions, t.rewards, t.terminated,
-                              t.next_features)
+        for part in (t, t.relabeled):  # the hindsight copies after the primitives themselves
+            if part is not None:
+                self.replay.add_batch(part.features, part.locations, part.motions, part.rewards,
+                                      part.terminated, part.next_features)
 
     def train(self, progress: bool = True) -> dict:
         from torch.utils.tensorboard import SummaryWriter

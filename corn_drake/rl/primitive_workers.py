@@ -27,6 +27,7 @@ import dataclasses
 import numpy as np
 import ray
 
+from corn_drake.rl.hindsight import HindsightRule
 from corn_drake.rl.primitive_collection import (
     Exploration,
     PrimitiveCollector,
@@ -40,12 +41,13 @@ MAX_REPLACEMENTS = 3
 @ray.remote(num_cpus=1)
 class PrimitiveWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
-                 seed: list[int]):
+                 seed: list[int], hindsight: HindsightRule | None = None):
         import torch
 
         # One core per worker: its inference must not spread threads over the others' cores.
         torch.set_num_threads(1)
-        self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent)
+        self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent,
+                                            hindsight=hindsight)
         self.rng = np.random.default_rng(seed)
 
     def collect(self, state: dict, version: int, rounds: int,
@@ -61,13 +63,14 @@ class PrimitiveWorker:
 
 class RayPrimitiveCollectors:
     """`num_workers` PrimitiveWorkers of `envs_per_worker` envs each. `seed` and `start_step`
-    seed the workers' random streams (a resumed run's workers draw new ones)."""
+    seed the workers' random streams (a resumed run's workers draw new ones); `hindsight`: the
+    workers relabel their finished episodes (rl/hindsight.py)."""
 
     def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
-                 seed: int, start_step: int = 0):
+                 seed: int, start_step: int = 0, hindsight: HindsightRule | None = None):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
-        self.factory, self.envs_per_worker = factory, envs_per_worker
+        self.factory, self.envs_per_worker, self.hindsight = factory, envs_per_worker, hindsight
         self._seed, self._start_step = int(seed), int(start_step)
         # The networks' architecture and the encoder travel once, at spawn.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
@@ -83,7 +86,8 @@ class RayPrimitiveCollectors:
         self._spawns[w] += 1
         # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
         return PrimitiveWorker.options(num_cpus=0).remote(
-            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent, seed)
+            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent, seed,
+            self.hindsight)
 
     def publish(self, agent, version: int) -> None:
         """Puts `agent`'s actor and critic (after update `version`) into the object store, once

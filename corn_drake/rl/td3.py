@@ -53,12 +53,22 @@ def masked(scores: torch.Tensor, features: Features) -> torch.Tensor:
     return scores.masked_fill(~choosable(mask).to(scores.device), float("-inf"))
 
 
-def select_primitives(scores_and_motions: tuple[torch.Tensor, torch.Tensor], *, greedy: bool,
+@torch.no_grad()
+def scores_and_motions(actor, critic, features: Features) -> tuple[torch.Tensor, torch.Tensor]:
+    """(per-location scores Q1(s, i, actor(s)_i), -inf where features["mask"] rules a location
+    out; the actor's motions): what the policy chooses by, from any copy of the networks."""
+    motions = actor(features)
+    q1, _ = critic(features, motions)
+    return masked(q1, features), motions
+
+
+def select_primitives(scored: tuple[torch.Tensor, torch.Tensor], *, greedy: bool,
                       temperature: float = 1.0, motion_noise: float = 0.0,
                       rng: np.random.Generator | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(location (B,) int64, motion (B, motion_dim) float32, scores (B, L) float32) from the
-    per-location scores (-inf where masked) and motions of a batch of states. A free function so
+    per-location scores (-inf where masked) and motions of a batch of states (`scored`:
+    scores_and_motions' pair). A free function so
     a collector holding only a copy of the actor and critic (a Ray worker,
     rl/primitive_collection.py) chooses exactly as the learner does.
 
@@ -74,7 +84,7 @@ def select_primitives(scores_and_motions: tuple[torch.Tensor, torch.Tensor], *, 
         if not (motion_noise >= 0 and math.isfinite(motion_noise)):
             raise ValueError(f"motion_noise: expected a finite value >= 0, got "
                              f"{motion_noise!r}")
-    q1, motions = scores_and_motions
+    q1, motions = scored
     scores = q1.cpu().numpy().astype(np.float32)
     motions = motions.cpu().numpy().astype(np.float32)
     batch = np.arange(scores.shape[0])
@@ -173,12 +183,8 @@ class TD3Learner:
         return {k: torch.as_tensor(v, dtype=torch.float32, device=self.device)
                 for k, v in features.items()}
 
-    @torch.no_grad()
     def _scores_and_motions(self, features: Features) -> tuple[torch.Tensor, torch.Tensor]:
-        features = self._on_device(features)
-        motions = self.actor(features)
-        q1, _ = self.critic(features, motions)
-        return masked(q1, features), motions
+        return scores_and_motions(self.actor, self.critic, self._on_device(features))
 
     def scores(self, features: Features) -> torch.Tensor:
         """(B, L): Q1(s, i, actor(s)_i) per location, the score the policy acts on (no grad;
