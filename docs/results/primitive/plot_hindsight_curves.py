@@ -1,0 +1,44 @@
+"""Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
+push policy, with hindsight goals (items 14-16 of README.md) and without (the table's rows).
+
+    .venv/bin/python docs/results/primitive/plot_hindsight_curves.py
+
+Reads this folder's train_history_<name>.json files (each {"run", "primitives", "history": rows
+of the trainer's metrics}); writes the figure next to them.
+"""
+
+import json
+from pathlib import Path
+
+from matplotlib.figure import Figure
+
+HERE = Path(__file__).resolve().parent
+RUNS = {  # label -> history file, drawn in this order (same colour per task, dashed: no hindsight)
+    "push_turn": ("train_history_push_turn.json", "tab:orange", "--"),
+    "push_turn + hindsight goals": ("train_history_push_turn_hindsight.json", "tab:orange", "-"),
+    "push_turn + hindsight goals, low pushes": ("train_history_push_turn_hindsight_low_push.json",
+                                                "tab:red", "-"),
+    "full6d": ("train_history_full6d.json", "tab:green", "--"),
+    "full6d + hindsight goals": ("train_history_full6d_hindsight.json", "tab:green", "-"),
+}
+
+
+def main() -> None:
+    fig = Figure(figsize=(9, 3.2))
+    success, q = fig.subplots(1, 2)
+    for label, (name, colour, style) in RUNS.items():
+        rows = json.loads((HERE / name).read_text())["history"]
+        steps = [r["step"] for r in rows]
+        success.plot(steps, [r["success_rate"] for r in rows], style, color=colour, label=label)
+        q.plot(steps, [r["q_mean"] if r["q_mean"] is not None else float("nan") for r in rows],
+               style, color=colour, label=label)
+    success.set(xlabel="primitives", ylabel="training success (exploring)",
+                ylim=(0, 0.5))
+    q.set(xlabel="primitives", ylabel="critic mean Q at taken locations")
+    success.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(HERE / "hindsight_curves.png", dpi=100)
+
+
+if __name__ == "__main__":
+    main()
