@@ -36,6 +36,7 @@ import numpy as np
 
 from corn_drake.contract import POSITION_DIM
 from corn_drake.nn.primitive_features import with_goal
+from corn_drake.systems.reward import within_tolerance
 from corn_drake.transforms import from_pose9, rotation_angle
 
 
@@ -95,10 +96,9 @@ def rotation_to(state: Achieved, goal: Achieved) -> float:
 
 
 def succeeded(rule: HindsightRule, state: Achieved, goal: Achieved) -> bool:
+    """The task's success rule (systems/reward.within_tolerance) at `state` for `goal`."""
     d = goal.position - state.position
-    if math.hypot(d[0], d[1]) > rule.success_position:
-        return False
-    return not rule.check_orientation or rotation_to(state, goal) <= rule.success_orientation
+    return within_tolerance(rule, math.hypot(d[0], d[1]), rotation_to(state, goal))
 
 
 def reward(rule: HindsightRule, before: Achieved, after: Achieved, goal: Achieved) -> float:

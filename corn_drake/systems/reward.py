@@ -53,6 +53,13 @@ def pose_errors(p, R, p_goal, R_goal) -> tuple[float, float]:
     return math.hypot(p_goal[0] - p[0], p_goal[1] - p[1]), rotation_angle(R_goal @ R.T)
 
 
+def within_tolerance(cfg, position_error: float, orientation_error: float) -> bool:
+    """The task's success rule on pose_errors' two errors: `cfg` has success_position,
+    check_orientation and success_orientation (a TaskConfig, or rl/hindsight's HindsightRule)."""
+    return position_error <= cfg.success_position and (
+        not cfg.check_orientation or orientation_error <= cfg.success_orientation)
+
+
 # The previous policy step, held as one vector: [object_state, hand_state, energy].
 PREVIOUS_PARTS = (FREE_BODY_STATE_DIM, HAND_STATE_DIM, 1)
 PREVIOUS_SIZE = sum(PREVIOUS_PARTS)
@@ -99,8 +106,7 @@ class TaskReward(LeafSystem):
         p, R = free_body_pose(self._object_state.Eval(context))
         p_goal, R_goal = self._goal(context)
         pos_err, ori_err = pose_errors(p, R, p_goal, R_goal)
-        oriented = not cfg.check_orientation or ori_err <= cfg.success_orientation
-        success = pos_err <= cfg.success_position and oriented
+        success = within_tolerance(cfg, pos_err, ori_err)
         out = bool(np.any(p < cfg.workspace_low) or np.any(p >= cfg.workspace_high))
         return np.array([float(success), float(out), pos_err, ori_err])
 
