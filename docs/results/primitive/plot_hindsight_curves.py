@@ -1,5 +1,5 @@
 """Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
-push policy, with hindsight goals (items 14-16 of README.md) and without (the table's rows).
+push policy, with hindsight goals (items 13-18 of README.md) and without (the table's rows).
 
     .venv/bin/python docs/results/primitive/plot_hindsight_curves.py
 
@@ -18,6 +18,9 @@ RUNS = {  # label -> history file, drawn in this order (same colour per task, da
     "push_turn + hindsight goals": ("train_history_push_turn_hindsight.json", "tab:orange", "-"),
     "push_turn + hindsight goals, low pushes": ("train_history_push_turn_hindsight_low_push.json",
                                                 "tab:red", "-"),
+    "push_turn + hindsight goals, from scratch": (
+        "train_history_push_turn_hindsight_from_scratch.json", "tab:purple", "-"),
+    "push_turn from scratch": ("train_history_push_turn_from_scratch.json", "tab:purple", "--"),
     "full6d": ("train_history_full6d.json", "tab:green", "--"),
     "full6d + hindsight goals": ("train_history_full6d_hindsight.json", "tab:green", "-"),
 }
