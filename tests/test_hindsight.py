@@ -1,7 +1,8 @@
 """Hindsight goals for the primitive learner (rl/hindsight.py, nn/primitive_features.with_goal):
 features rewritten for another goal equal the features of an observation with that goal; the
 relabelled reward of the episode's own goal is PrimitiveEnv's reward (an independent
-computation: the env's from the plant's pose and the object's corners); a finished episode's
+computation: the env's from the plant's pose and the object's corners or body cloud; the cloud
+distance also from the observation's world cloud alone); a finished episode's
 copies end with its reached poses as successes; a run stores them without counting them."""
 
 import numpy as np
@@ -13,11 +14,11 @@ from corn_drake.config.primitive import PrimitiveConfig, PrimitiveTrainConfig
 from corn_drake.errors import InputError
 from corn_drake.nn.primitive_features import location_features, with_goal
 from corn_drake.package_data import data_dir
-from corn_drake.rl.hindsight import (Achieved, HindsightRule, achieved_states, relative_goal,
-                                     reward)
+from corn_drake.rl.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
+                                     relative_goal, reward)
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.rl.primitive_env import PrimitiveEnv
-from corn_drake.transforms import pose9
+from corn_drake.transforms import from_pose9, pose9
 
 ENCODER = data_dir("models") / "weights" / "push_corn" / "encoder.pt"
 
@@ -62,16 +63,16 @@ def test_features_with_another_goal_equal_the_features_of_that_goal(locations):
     np.testing.assert_array_equal(rewritten["tokens"], have["tokens"])
 
 
-def _own_goal(obs) -> Achieved:
-    """The episode's own goal as an Achieved state, from one observation (unbatched)."""
+def _own_goal(obs, key: str = "object_keypoints") -> Achieved:
+    """The episode's own goal as an Achieved state, from one observation (unbatched), with the
+    points of observation `key` (the corners or the cloud)."""
     p = np.asarray(obs["object_position"], float)
-    state = achieved_states({k: obs[k][None] for k in
-                             ("object_position", "goal", "object_keypoints")})[0]
+    state = achieved_states({k: obs[k][None] for k in ("object_position", "goal", key)}, key)[0]
     p_goal = p + np.asarray(obs["goal"][:3], float)
-    corners = (np.asarray(obs["object_keypoints"], float).reshape(-1, 3) - p) \
-        @ state.goal_rotation.T  # the corners turned as the goal turns them
-    corners[:, :2] += p_goal[:2]
-    return Achieved(p_goal, np.eye(3), corners)
+    points = (np.asarray(obs[key], float).reshape(-1, 3) - p) \
+        @ state.goal_rotation.T  # the points turned as the goal turns them
+    points[:, :2] += p_goal[:2]
+    return Achieved(p_goal, np.eye(3), points)
 
 
 def _turning_push(env, obs) -> dict:
@@ -83,20 +84,41 @@ def _turning_push(env, obs) -> dict:
     return {"point": index, "motion": 0.6 * inward + 0.6 * np.array([-normal[1], normal[0], 0])}
 
 
-def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward():
-    primitive = PrimitiveConfig(turn_reward=2.0)
+def _cloud_distance(obs, goal_pose) -> float:
+    """Mean distance between the observation's cloud and the same body points placed at
+    `goal_pose` ([p, q_wxyz]), the height of the object's origin dropped; from the observation
+    alone (the env's cloud_distance reads the plant's pose and the body-frame cloud)."""
+    p = np.asarray(obs["object_position"], float)
+    R_goal_R_t = from_pose9(np.asarray(obs["goal"], float))[1]  # R_goal R^T
+    cloud = np.asarray(obs["cloud"], float)
+    at_goal = (cloud - p) @ R_goal_R_t.T + [goal_pose[0], goal_pose[1], 0.0]
+    return float(np.linalg.norm(cloud - [0.0, 0.0, p[2]] - at_goal, axis=1).mean())
+
+
+@pytest.mark.parametrize("reward_points", ["keypoints", "cloud"])
+def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward(reward_points):
+    primitive = PrimitiveConfig(turn_reward=2.0, reward_points=reward_points)
     env = PrimitiveEnv(load_primitive_env_config("push_turn"), primitive)
     rule = HindsightRule.for_run(1, primitive, env.cfg.task)
+    key = rule.points_key
     obs, _ = env.reset(seed=2)
     rotation_before = env.rotation_to_goal()
     nxt, env_reward, terminated, _, info = env.step(_turning_push(env, obs))
     assert not terminated and info["status"]["success"] == 0
     assert abs(env.rotation_to_goal() - rotation_before) > 0.01  # it did turn
+    if reward_points == "cloud":  # the env's distance, from the observation's own cloud
+        goal_pose = np.asarray(env.episode.goal_pose, float)
+        assert env.cloud_distance() == pytest.approx(_cloud_distance(nxt, goal_pose), abs=1e-5)
+        assert env_reward == pytest.approx(primitive.progress_reward * (
+            _cloud_distance(obs, goal_pose) - _cloud_distance(nxt, goal_pose)) + 2.0 * (
+            rotation_before - env.rotation_to_goal()), abs=1e-4)
+        # The two rewards differ: the cloud's points are not the box's corners.
+        assert env.cloud_distance() != pytest.approx(env.keypoint_distance(), abs=1e-3)
     [before], [after] = (achieved_states({k: o[k][None] for k in
-                                          ("object_position", "goal", "object_keypoints")})
+                                          ("object_position", "goal", key)}, key)
                          for o in (obs, nxt))
-    goal = _own_goal(obs)
-    np.testing.assert_allclose(_own_goal(nxt).keypoints, goal.keypoints, atol=1e-5)
+    goal = _own_goal(obs, key)
+    np.testing.assert_allclose(_own_goal(nxt, key).keypoints, goal.keypoints, atol=1e-5)
     # The goal relative to each state, as its observation holds it.
     for state, o in ((before, obs), (after, nxt)):
         position, rotation = relative_goal(state, goal)
@@ -173,3 +195,54 @@ def test_a_hindsight_run_stores_the_copies_and_counts_only_its_primitives(tmp_pa
 def test_hindsight_goals_refuse_the_tipping_penalty():
     with pytest.raises(InputError, match="hindsight_goals.*tip_penalty"):
         _cfg(primitive=PrimitiveConfig(tip_penalty=1.0)).check()
+
+
+def _episode_leaving_the_workspace(exit_goals: bool, exit_penalty: float = 0.0) -> dict:
+    """The copies of a hand-made 3-primitive episode whose last push threw the object 0.6 m
+    away (the env ended it there without success), under a rule with `exit_goals`."""
+    rule = HindsightRule(goals=8, progress_reward=10.0, turn_reward=0.0, success_reward=1.0,
+                         success_position=0.05, success_orientation=0.25,
+                         check_orientation=True, exit_goals=exit_goals,
+                         exit_penalty=exit_penalty)
+    corners = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.03, 0.03)
+                        for z in (0.0, 0.04)])
+
+    def state(x: float) -> Achieved:
+        return Achieved(np.array([x, 0.0, 0.42]), np.eye(3), corners + [x, 0.0, 0.0])
+
+    episodes = HindsightEpisodes(rule, 1)
+    episodes.begin(0, state(0.0))
+    for t, x in enumerate((0.04, 0.08, 0.68)):
+        features = {"tokens": np.full((16, 4), t, np.float32),
+                    "local": np.zeros((16, 9), np.float32),
+                    "global": np.zeros(146, np.float32)}
+        episodes.add(0, features, t, np.zeros(3), t == 2, features, state(x))
+    return episodes.finish(0, succeeded_=False, relabel=True, rng=np.random.default_rng(0))
+
+
+def test_a_pose_outside_the_workspace_is_a_goal_only_when_the_rule_allows_it():
+    kept = _episode_leaving_the_workspace(exit_goals=True)
+    # Every copy of the push that threw the object out takes that pose: a success each time.
+    thrown = kept["locations"] == 2
+    assert thrown.sum() == 8 and (kept["rewards"][thrown] > 1.0).all()
+    assert kept["terminated"][thrown].all()
+    left = _episode_leaving_the_workspace(exit_goals=False)
+    # No copy of that push; the earlier ones take only poses within the workspace as goals
+    # (goal positions relative to the state: 0.04 or 0.08 m ahead, never 0.6 m).
+    assert sorted(set(left["locations"].tolist())) == [0, 1]
+    assert len(left["locations"]) == 2 * 8
+    ahead = left["features"]["global"][:, 0] / 10.0  # the relative goal's x, decimetres
+    assert np.abs(ahead).max() < 0.1 + 1e-6
+    assert (kept["features"]["global"][:, 0] / 10.0).max() > 0.5
+    # The last in-workspace pose, taken by the second push: a success that ends the copy.
+    second = left["locations"] == 1
+    assert (left["rewards"][second] > 1.0).all() and left["terminated"][second].all()
+
+
+def test_the_push_that_left_the_workspace_loses_the_exit_penalty_in_every_copy():
+    plain = _episode_leaving_the_workspace(exit_goals=True)
+    penalised = _episode_leaving_the_workspace(exit_goals=True, exit_penalty=0.7)
+    thrown = plain["locations"] == 2
+    np.testing.assert_allclose(penalised["rewards"][thrown], plain["rewards"][thrown] - 0.7,
+                               atol=1e-6)
+    np.testing.assert_array_equal(penalised["rewards"][~thrown], plain["rewards"][~thrown])

@@ -137,6 +137,7 @@ def test_a_shipped_primitive_folder_holds_what_evaluate_reads_and_evaluates_as_t
     teacher_card = json.loads((WEIGHTS / "push_corn" / "card.json").read_text())
     assert set(teacher_card) <= set(card), set(teacher_card) - set(card)  # a card like the others
     assert card["policy"] == "primitive" and card["env_steps"] == 24
+    assert card["locations"] == "patch" and card["location_count"] == 16
     assert card["env_steps_unit"] == "primitives" and card["episodes"] == 2
     assert card["success_rate"] == report["success_rate"] and card["source_run"] == str(run)
     assert card["encoder"]["file"] == "encoder.pt" and card["encoder"]["kind"] == "corn"

@@ -208,6 +208,26 @@ def test_the_turn_reward_adds_the_rotation_closed_toward_the_goal():
     assert weighted - plain == pytest.approx(2.0 * (before - after), abs=1e-6)
 
 
+def test_a_push_off_the_workspace_ends_the_episode_and_costs_the_exit_penalty():
+    """The workspace's +x bound put 2 cm beyond the box's start, and a full +x push: the
+    episode ends out of the workspace, with rewards differing by exactly the penalty."""
+    from corn_drake.config.primitive import PrimitiveConfig
+
+    start = PrimitiveEnv(_config("box")).reset(seed=4)[0]["object_position"]
+    results = []
+    for penalty in (0.0, 1.5):
+        cfg = _config("box")
+        cfg.task.workspace_high = [float(start[0]) + 0.02, 0.55, 0.9]
+        env = PrimitiveEnv(cfg, PrimitiveConfig(exit_penalty=penalty))
+        obs, _ = env.reset(seed=4)
+        np.testing.assert_allclose(obs["object_position"], start, atol=1e-9)
+        index = int(np.argmin(obs["normals"][:, 0] + 3 * np.abs(obs["normals"][:, 2])))
+        _, reward, terminated, _, info = env.step({"point": index, "motion": [1.0, 0.0, 0.0]})
+        assert terminated and info["status"]["out_of_workspace"] > 0
+        results.append(reward)
+    assert results[1] == pytest.approx(results[0] - 1.5, abs=1e-6)
+
+
 def test_tipping_is_no_failure_on_the_6d_task_whose_goals_change_the_face():
     _, _, end, _, info = _tipped_goal_step("full6d", 1.5)
     assert not end and "tipped" not in info
@@ -266,12 +286,12 @@ def test_a_primitive_into_the_table_leaves_the_object_where_it_was():
 
 # ------------------------------------------------------------------------------- the policy
 
-def _agent(seed: int = 0):
+def _agent(seed: int = 0, locations: str = "patch"):
     from corn_drake.nn.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive_agent import PrimitiveAgent
 
     torch.manual_seed(seed)
-    return PrimitiveAgent(make_policy_encoder("corn")).eval()
+    return PrimitiveAgent(make_policy_encoder("corn"), locations).eval()
 
 
 def _step_until_count(env: PrimitiveEnv, count: int, max_ticks: int = 80) -> dict:
@@ -289,8 +309,9 @@ def _step_until_count(env: PrimitiveEnv, count: int, max_ticks: int = 80) -> dic
     raise AssertionError(f"no primitive {count} within {max_ticks} ticks")
 
 
-def test_the_reported_location_is_the_policys_own_choice():
-    agent = _agent()
+@pytest.mark.parametrize("locations", ["patch", "point"])
+def test_the_reported_location_is_the_policys_own_choice(locations):
+    agent = _agent(locations=locations)
     env = PrimitiveEnv(_config("box"), agent=agent)
     obs, _ = env.reset(seed=3)
     first = agent.choose(obs)  # the first primitive is chosen at the episode's first tick

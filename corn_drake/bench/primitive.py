@@ -54,6 +54,9 @@ def add_arguments(parser):
     parser.add_argument("--locations", choices=("patch", "point"), default="patch",
                         help="the policy's candidate contact locations, as `train --set "
                              "locations=...`")
+    parser.add_argument("--point-locations", type=positive_int, default=64,
+                        help="how many cloud points a 'point' policy scores, as `train --set "
+                             "point_locations=...` (default 64)")
     parser.add_argument("--encoder", default="",
                         help="a CORN encoder file for both policies (default: randomly "
                              "initialised ones; the pace is the same)")
@@ -165,14 +168,14 @@ def run(args) -> dict:
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.agent import TeacherAgent
     from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.primitive_agent import PrimitiveAgent
+    from corn_drake.rl.primitive_agent import agent_for
     from corn_drake.rl.primitive_env import PrimitiveEnv
     from corn_drake.rl.primitive_trainer import td3_settings
     from corn_drake.rl.replay import ReplayBuffer
     from corn_drake.rl.td3 import TD3Learner
 
     cfg = PrimitiveTrainConfig(env=load_primitive_env_config(args.task), locations=args.locations,
-                               seed=args.seed)
+                               point_locations=args.point_locations, seed=args.seed)
     if args.batch_size is not None:
         cfg.batch_size = args.batch_size
     cfg.check()
@@ -181,7 +184,7 @@ def run(args) -> dict:
     with torch_threads(args.torch_threads):
         threads_used = torch.get_num_threads()
         torch.manual_seed(args.seed)
-        agent = PrimitiveAgent(_encoder(args.encoder), cfg.locations, cfg.hidden).eval()
+        agent = agent_for(cfg, _encoder(args.encoder)).eval()
         env = PrimitiveEnv(cfg.env, cfg.primitive)
         # Every decision's transition fits: none is overwritten before the updates sample it.
         replay = ReplayBuffer(args.warmup + args.decisions)
@@ -219,7 +222,9 @@ def run(args) -> dict:
         "forward_primitive_to_dense": forward_ms / dense_forward_ms,
         "reference": "dense corn teacher: TeacherEnv + TeacherAgent mean actions, one env",
         "task": cfg.env.task.name, "object": env.scene.object_spec.name,
-        "locations": cfg.locations, "encoder": args.encoder or "random",
+        "locations": cfg.locations,
+        "point_locations": cfg.point_locations if cfg.locations == "point" else None,
+        "encoder": args.encoder or "random",
         "decisions": args.decisions, "dense_steps": args.dense_steps, "updates": args.updates,
         "warmup": args.warmup, "batch_size": cfg.batch_size, "replay_transitions": len(replay),
         "episodes_ended": decisions["episodes_ended"], "seed": args.seed,

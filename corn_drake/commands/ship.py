@@ -277,7 +277,9 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
                 "history": state.get("history", [])})
     return {"policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
-            "locations": cfg.locations, "training_history": "training_history.json",
+            "locations": cfg.locations, "location_count": agent.location_count(
+                cfg.env.scene.object.cloud_points),
+            "training_history": "training_history.json",
             "encoder": {"file": cfg.encoder, "kind": agent.encoder.kind,
                         "pretraining": getattr(agent.encoder, "pretraining", None)}}
 

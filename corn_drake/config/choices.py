@@ -9,8 +9,12 @@ CAMERA_MODES = ("fixed", "tracking")
 SEGMENTATION_MODES = ("geometric", "ground_truth")
 # What the student executes of its own action in DAgger: the Gaussian's mean or a sample of it.
 STUDENT_ACTIONS = ("mean", "sample")
-# The contact-primitive policy's candidate locations: the encoder's patch centres. (Every cloud
-# point, "point", is what nn/primitive_features.py can also build, but its replay would hold
-# 512 tokens per state, 32x the patch replay's ~10 KB per transition: not offered until the
-# replay stores patch tokens once and gathers them at sampling.)
-PRIMITIVE_LOCATIONS = ("patch",)
+# The contact-primitive policy's candidate locations: the encoder's 16 patch centres ("patch"), or
+# cloud points ("point": PrimitiveTrainConfig.point_locations of them, farthest-point spread, each
+# with its nearest patch's token). Every point of a 512-point cloud is allowed but costs 32x the
+# patch policy's replay (~10 KB per transition) and update time: 64 points cost ~3.3x the update
+# (95 vs 29 ms measured on this machine, batch 64), 128 points ~6.7x.
+PRIMITIVE_LOCATIONS = ("patch", "point")
+# The body points the primitive env's progress reward measures the distance to the goal on
+# (PrimitiveConfig.reward_points): the bounding-box corners, or the object's surface cloud.
+PRIMITIVE_REWARD_POINTS = ("keypoints", "cloud")

@@ -14,7 +14,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 
 from corn_drake.config.bounds import check_bounds
-from corn_drake.config.choices import PRIMITIVE_LOCATIONS
+from corn_drake.config.choices import PRIMITIVE_LOCATIONS, PRIMITIVE_REWARD_POINTS
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import RunSettings
 from corn_drake.errors import InputError
@@ -30,7 +30,7 @@ class PrimitiveConfig:
               "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
               "progress_reward": ">= 0", "tip_penalty": ">= 0", "push_height": ">= 0",
               "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]",
-              "turn_reward": ">= 0"}
+              "turn_reward": ">= 0", "exit_penalty": ">= 0"}
     # The tool point stops this far off the surface along the normal before the push. The
     # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
     pre_contact_distance: float = 0.04
@@ -71,6 +71,13 @@ class PrimitiveConfig:
     # paper's own scale (k1 0.302 x 1.2 per metre, 0.02 for 5 cm) is drowned by the success
     # bonus over a 10-primitive episode.
     progress_reward: float = 10.0
+    # Which body points that distance is measured on: "keypoints", the object's 8 bounding-box
+    # corners (the paper's); "cloud", the points of the object's surface cloud (the
+    # observation's, 512), i.e. the mean length of HACMan's per-point goal flow. Both drop the
+    # height of the object's origin (systems/reward.keypoints_at). Measured on push_turn with
+    # hindsight goals: "cloud" 0.225 against 0.245-0.295 with the corners (docs/results/
+    # primitive/, item 20), hence the corners by default.
+    reward_points: str = "keypoints"
     # Plus this times how much the primitive closed the object's rotation to its goal (rad).
     # Why: the keypoint progress is mostly translation (a 0.6 rad turn moves a 10 cm object's
     # box corners ~3 cm, a push goal 8-12 cm), and a critic fitted to it on push_turn chose
@@ -87,6 +94,14 @@ class PrimitiveConfig:
     # Measured with 1.0 on push_turn: the policy learned to stop touching the object (greedy
     # success 0.025 against 0.165 without it), hence off by default.
     tip_penalty: float = 0.0
+    # A primitive after which the object has left the workspace (off the 0.4 x 0.5 m table:
+    # the goal region ends 4-5 cm from its edges) earns this much less. Why: the keypoint
+    # progress drops the object's height, so a fall costs only its xy drift, and 29-54 of 200
+    # unseen push_turn episodes of the hindsight policies ended off the table. The hindsight
+    # copies of that primitive lose it too. Measured with 1.0 (and hindsight_exit_goals off):
+    # 39 episodes off the table instead of 45, but 11 never touched and success 0.220 against
+    # 0.260 (item 22): the policy pushed less. Hence 0, off, by default.
+    exit_penalty: float = 0.0
     # Side pushes aim this high above the table (m; the tool point), lowered from the chosen
     # contact point as far as the object's cloud leaves room for the fingers
     # (systems/low_push.py: a push at mid-height tips an upright bottle or a tall box, one near
@@ -116,11 +131,16 @@ class PrimitiveTrainConfig(RunSettings):
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
               "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
               "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1",
-              "actor_warmup": ">= 0", "hindsight_goals": ">= 0"}
+              "actor_warmup": ">= 0", "hindsight_goals": ">= 0", "point_locations": ">= 1"}
     policy: str = "primitive"
     # Candidate contact locations: "patch", the encoder's 16 patch centres (each a cloud point)
-    # with their tokens (config/choices.py PRIMITIVE_LOCATIONS says why not every point yet).
+    # with their tokens, or "point", `point_locations` cloud points spread by farthest-point
+    # sampling (the first 16 are the patch centres), each with its nearest patch's token
+    # (config/choices.py PRIMITIVE_LOCATIONS has their cost). Measured on push_turn with
+    # hindsight goals: 64 points 0.220 against 0.245-0.295 for the patch centres at 3.3x the
+    # update time (docs/results/primitive/, item 19), hence "patch" by default.
     locations: str = "patch"
+    point_locations: int = 64
     replay_capacity: int = 200_000
     learning_starts: int = 256
     updates_per_step: int = 1
@@ -145,6 +165,14 @@ class PrimitiveTrainConfig(RunSettings):
     # transitions are stored this many more times, each with a goal the episode reached later,
     # so primitives that turned the object somewhere teach turning. 0: off.
     hindsight_goals: int = 0
+    # Whether the pose where an episode left the workspace may be one of those goals. True is
+    # how the hindsight runs of docs/results/primitive/ items 13-18 ran: the push that threw
+    # the object out then came back as a success in every copy (its only later pose), and those
+    # policies ended 29-54 of 200 unseen push_turn episodes out of the workspace (16 without
+    # hindsight goals). False: such a pose is never a goal, that push gets no copies. Measured
+    # off: 0.260 and still 45 episodes off the table (item 21): the falls come from the pushes,
+    # not from these goals. Kept on by default so the earlier runs' commands repeat them.
+    hindsight_exit_goals: bool = True
     # The first primitives choose uniformly random locations and motions (fills the replay).
     random_steps: int = 512
     hidden: int = 256
@@ -160,9 +188,17 @@ class PrimitiveTrainConfig(RunSettings):
     def check(self) -> None:
         """InputError naming the first field a run cannot start with (the env's too)."""
         check_bounds(self)  # nested configs too (primitive, env)
+        if self.primitive.reward_points not in PRIMITIVE_REWARD_POINTS:
+            raise InputError(f"primitive.reward_points must be one of "
+                             f"{', '.join(PRIMITIVE_REWARD_POINTS)}, got "
+                             f"{self.primitive.reward_points!r}")
         if self.locations not in PRIMITIVE_LOCATIONS:
             raise InputError(f"locations must be one of {', '.join(PRIMITIVE_LOCATIONS)}, got "
                              f"{self.locations!r}")
+        points = self.env.scene.object.cloud_points
+        if self.locations == "point" and self.point_locations > points:
+            raise InputError(f"point_locations ({self.point_locations}) must not exceed the "
+                             f"cloud's {points} points (env.scene.object.cloud_points)")
         if self.policy != "primitive":
             raise InputError(f"a primitive run's policy must be 'primitive', got {self.policy!r}")
         if self.hindsight_goals and self.primitive.tip_penalty > 0:

@@ -1,8 +1,9 @@
 """Per-location features of the contact-primitive policy, from the frozen CORN encoder's tokens.
 
 A location is where the policy may touch the object: one of the encoder's patch centres
-("patch": 16 per cloud, each a cloud point) or every cloud point ("point": 512, each carrying
-the token of its nearest patch centre). For each location the policy sees
+("patch": 16 per cloud, each a cloud point) or cloud points ("point": `point_count` of them
+spread by farthest-point sampling, every point when it is the cloud's size, each carrying the
+token of its nearest patch centre). For each location the policy sees
   tokens (D)  the patch token (the contact-pretrained encoder's summary of that part of the
               object, having attended to the hand token and every other patch);
   local (9)   the location relative to the object's origin, its goal flow (where the goal pose
@@ -20,7 +21,7 @@ import numpy as np
 import torch
 
 from corn_drake.nn.geometry import matrix_from_rot6d
-from corn_drake.nn.patchify import gather_points, patch_indices
+from corn_drake.nn.patchify import farthest_point_sample, gather_points, patch_indices
 
 POSITION_SCALE = 10.0  # metres -> decimetres
 LOCATION_KINDS = ("patch", "point")
@@ -57,11 +58,25 @@ def with_goal(features: dict[str, np.ndarray], goal_position: np.ndarray,
     return out
 
 
-def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "patch"
+def point_candidates(cloud: torch.Tensor, count: int) -> torch.Tensor:
+    """(B, count) cloud indices of the "point" locations: every point when `count` is the
+    cloud's size, else `count` farthest-point samples from point 0 (deterministic, so a display
+    can recompute them: viz/primitive_view.point_locations)."""
+    B, N = cloud.shape[:2]
+    if not 1 <= count <= N:
+        raise ValueError(f"point_count must be in [1, {N}] for a {N}-point cloud, got {count}")
+    if count == N:
+        return torch.arange(N, device=cloud.device).expand(B, N)
+    return farthest_point_sample(cloud, count)
+
+
+def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "patch",
+                      point_count: int | None = None
                       ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
     """(features {"tokens" (B, L, D), "local" (B, L, 9), "global" (B, 146)}, candidates (B, L):
     each location's index into the cloud) for a batch of primitive-env observations (torch,
-    batched). `encoder`: a NormalizedEncoder of a patch kind."""
+    batched). `encoder`: a NormalizedEncoder of a patch kind; `point_count`: how many "point"
+    locations (None: every cloud point)."""
     if locations not in LOCATION_KINDS:
         raise ValueError(f"locations must be one of {LOCATION_KINDS}, got {locations!r}")
     cloud, hand = obs["cloud"], obs["hand_state"]
@@ -76,11 +91,12 @@ def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "p
         loc_normals = gather_points(normals, candidates)
         loc_tokens = patch_tokens
     else:
-        B, N = cloud.shape[:2]
-        candidates = torch.arange(N, device=cloud.device).expand(B, N)
-        points, loc_normals = cloud, normals
+        candidates = point_candidates(cloud, cloud.shape[1] if point_count is None
+                                      else int(point_count))
+        points = gather_points(cloud, candidates)
+        loc_normals = gather_points(normals, candidates)
         centers = gather_points(cloud, center_idx)
-        nearest = torch.cdist(cloud, centers).argmin(-1)  # (B, N)
+        nearest = torch.cdist(points, centers).argmin(-1)  # (B, L)
         loc_tokens = torch.gather(patch_tokens, 1,
                                   nearest.unsqueeze(-1).expand(-1, -1, patch_tokens.shape[-1]))
     R_rel = matrix_from_rot6d(goal[:, 3:9])  # goal rotation relative to the object's

@@ -11,10 +11,13 @@ the object was after a later primitive j >= t (uniform over the episode's later 
 reward and end PrimitiveEnv would have given for that goal:
     progress_reward * (d(t) - d(t+1)) + turn_reward * (a(t) - a(t+1)) + success_reward * [success(t+1)]
 d: the mean distance between the object's bounding-box keypoints (height dropped) and the goal's
-(PrimitiveEnv.keypoint_distance); a: the angle of the rotation between object and goal; success:
+(PrimitiveEnv.keypoint_distance), or between its cloud's points and theirs with reward_points
+"cloud" (PrimitiveEnv.cloud_distance: the teacher's cloud is fixed body points, so point i of
+two observations is one body point); a: the angle of the rotation between object and goal; success:
 the task's rule (planar xy within success_position and, where the task checks it, the rotation
 within success_orientation). A copy ends its episode (no bootstrap) when it succeeds under its
-goal or when the original transition ended the episode without success (left the workspace).
+goal or when the original transition ended the episode without success (left the workspace),
+and then also loses PrimitiveConfig.exit_penalty, as the env's transition did.
 
 Everything comes from the observations. The observation's goal rotation is G = R_goal R^T, and an
 episode's goal is fixed, so the rotation from state t to state j is R_j R_t^T = G_j^T G_t; the
@@ -49,31 +52,50 @@ class HindsightRule:
     success_position: float  # m, planar
     success_orientation: float  # rad
     check_orientation: bool
+    reward_points: str = "keypoints"  # PrimitiveConfig.reward_points
+    # Whether the pose an episode left the workspace at may be a relabelled goal
+    # (PrimitiveTrainConfig.hindsight_exit_goals).
+    exit_goals: bool = True
+    exit_penalty: float = 0.0  # PrimitiveConfig.exit_penalty
 
     @classmethod
-    def for_run(cls, goals: int, primitive, task) -> HindsightRule | None:
+    def for_run(cls, goals: int, primitive, task, exit_goals: bool = True
+                ) -> HindsightRule | None:
         """The rule of a run (PrimitiveConfig, TaskConfig); None when `goals` is 0 (off)."""
         if not goals:
             return None
         return cls(int(goals), primitive.progress_reward, primitive.turn_reward,
                    task.success_reward, task.success_position, task.success_orientation,
-                   task.check_orientation)
+                   task.check_orientation, primitive.reward_points, bool(exit_goals),
+                   primitive.exit_penalty)
+
+    @property
+    def points_key(self) -> str:
+        """The observation key achieved_states reads the reward's points from."""
+        return POINTS_KEYS[self.reward_points]
+
+
+# The observation holding each PrimitiveConfig.reward_points choice's points (world frame).
+POINTS_KEYS = {"keypoints": "object_keypoints", "cloud": "cloud"}
 
 
 @dataclasses.dataclass(frozen=True)
 class Achieved:
     """Where one observation puts the object: its position, the goal rotation G = R_goal R^T,
-    and its keypoints with the height of its origin dropped (as systems/reward.keypoints_at)."""
+    and the reward's points (keypoints or cloud) with the height of its origin dropped (as
+    systems/reward.keypoints_at)."""
     position: np.ndarray  # (3,)
     goal_rotation: np.ndarray  # (3, 3)
-    keypoints: np.ndarray  # (8, 3)
+    keypoints: np.ndarray  # (8, 3) corners, or (N, 3) cloud points
 
 
-def achieved_states(obs: dict[str, np.ndarray]) -> list[Achieved]:
-    """One Achieved per row of a batch of primitive-env observations."""
+def achieved_states(obs: dict[str, np.ndarray],
+                    points_key: str = "object_keypoints") -> list[Achieved]:
+    """One Achieved per row of a batch of primitive-env observations, its points from
+    `points_key` (HindsightRule.points_key)."""
     states = []
     for position, goal, keypoints in zip(obs["object_position"], obs["goal"],
-                                         obs["object_keypoints"]):
+                                         obs[points_key]):
         position = np.asarray(position, np.float64)
         points = np.asarray(keypoints, np.float64).reshape(-1, POSITION_DIM).copy()
         points[:, 2] -= position[2]
@@ -87,7 +109,9 @@ def relative_goal(state: Achieved, goal: Achieved) -> tuple[np.ndarray, np.ndarr
     return goal.position - state.position, goal.goal_rotation.T @ state.goal_rotation
 
 
-def keypoint_distance(state: Achieved, goal: Achieved) -> float:
+def points_distance(state: Achieved, goal: Achieved) -> float:
+    """Mean distance between the reward's points at `state` and at `goal` (PrimitiveEnv's
+    progress_distance)."""
     return float(np.linalg.norm(state.keypoints - goal.keypoints, axis=1).mean())
 
 
@@ -103,7 +127,7 @@ def succeeded(rule: HindsightRule, state: Achieved, goal: Achieved) -> bool:
 
 def reward(rule: HindsightRule, before: Achieved, after: Achieved, goal: Achieved) -> float:
     """PrimitiveEnv's reward for the primitive from `before` to `after` had the goal been `goal`."""
-    r = rule.progress_reward * (keypoint_distance(before, goal) - keypoint_distance(after, goal))
+    r = rule.progress_reward * (points_distance(before, goal) - points_distance(after, goal))
     if rule.turn_reward:
         r += rule.turn_reward * (rotation_to(before, goal) - rotation_to(after, goal))
     if succeeded(rule, after, goal):
@@ -150,14 +174,24 @@ class HindsightEpisodes:
         if not relabel or start is None or not steps:
             return None
         states = [start] + [s.after for s in steps]  # state t+1 follows transition t
+        # An episode that ended without success (and without a sim error) left the workspace:
+        # its last pose is no goal the task sets, and as one it would make the push that threw
+        # the object out a success (its copies all take that pose when it is the only later one).
+        exited = steps[-1].terminated and not succeeded_
+        last_goal = len(steps) - 1 if exited and not self.rule.exit_goals else len(steps)
         rows = []
         for t, step in enumerate(steps):
             ended_otherwise = step.terminated and t == len(steps) - 1 and not succeeded_
-            for j in rng.integers(t + 1, len(steps) + 1, size=self.rule.goals):
+            if t + 1 > last_goal:
+                continue  # no later pose within the workspace to take as a goal
+            for j in rng.integers(t + 1, last_goal + 1, size=self.rule.goals):
                 goal = states[j]
                 done = succeeded(self.rule, states[t + 1], goal) or ended_otherwise
-                rows.append((t, goal, reward(self.rule, states[t], states[t + 1], goal), done))
-        return self._columns(steps, states, rows)
+                r = reward(self.rule, states[t], states[t + 1], goal)
+                if ended_otherwise:  # left the workspace, whatever the goal
+                    r -= self.rule.exit_penalty
+                rows.append((t, goal, r, done))
+        return self._columns(steps, states, rows) if rows else None
 
     @staticmethod
     def _columns(steps, states, rows) -> dict[str, object]:

@@ -41,9 +41,10 @@ class PrimitiveAgent(nn.Module):
     has_attention = False  # the dense policies' patch attention; this one shows its scores
 
     def __init__(self, encoder, locations: str = "patch", hidden: int = 256,
-                 primitive_config=None):
+                 primitive_config=None, point_locations: int = 64):
         """`primitive_config`: how the executor runs the primitives (PrimitiveConfig; the
-        default one when None): which locations it would give up decides the mask."""
+        default one when None): which locations it would give up decides the mask.
+        `point_locations`: how many cloud points a "point" agent scores."""
         super().__init__()
         from corn_drake.config.primitive import PrimitiveConfig
 
@@ -55,6 +56,7 @@ class PrimitiveAgent(nn.Module):
         for p in self.encoder.parameters():
             p.requires_grad_(False)
         self.locations, self.hidden = locations, hidden
+        self.point_locations = int(point_locations)
         dim = encoder.network.dim
         self.actor = PrimitiveActor(dim, LOCAL_DIM, global_dim(dim), hidden)
         self.critic = PrimitiveCritic(dim, LOCAL_DIM, global_dim(dim), hidden)
@@ -69,7 +71,8 @@ class PrimitiveAgent(nn.Module):
         cannot repeat a primitive that does nothing episode-long."""
         _, batch = obs_to_torch(obs)
         self.encoder.eval()
-        features, candidates = location_features(self.encoder, batch, self.locations)
+        features, candidates = location_features(self.encoder, batch, self.locations,
+                                                 self.point_locations)
         features["mask"] = self._reachable(batch, candidates)
         return features, candidates
 
@@ -108,19 +111,46 @@ class PrimitiveAgent(nn.Module):
                 "usable": features["mask"][0].numpy() > 0.5,
                 "candidates": candidates[0].numpy()}
 
+    def location_count(self, num_points: int) -> int:
+        """How many candidate locations the agent scores per observation of `num_points`."""
+        if self.locations == "patch":
+            return self.encoder.network.num_patches
+        return min(self.point_locations, num_points)
+
+    def _shape(self) -> tuple:
+        """What a saved state must match to be this agent's: its locations and width."""
+        points = self.point_locations if self.locations == "point" else None
+        return self.locations, points, self.hidden
+
     def network_state(self) -> dict:
-        return {"locations": self.locations, "hidden": self.hidden,
+        return {"locations": self.locations, "point_locations": self.point_locations,
+                "hidden": self.hidden,
                 "actor": self.actor.state_dict(), "critic": self.critic.state_dict()}
 
-    def load_network_state(self, state: dict, source) -> None:
+    def load_network_state(self, state: dict, source, heads_only: bool = False) -> None:
+        """The actor's and critic's weights from network_state(). `heads_only`: accept an agent
+        of other locations (the heads score each location alone, so a patch policy's heads
+        score points as they score patch centres: a start for a point run, `init_from`)."""
         from corn_drake.errors import InputError
 
-        if state.get("locations") != self.locations or state.get("hidden") != self.hidden:
-            raise InputError(f"{source}: a primitive agent with locations "
-                             f"{state.get('locations')!r}, hidden {state.get('hidden')}, not "
-                             f"{self.locations!r}, {self.hidden}")
+        saved = (state.get("locations"),
+                 state.get("point_locations", 64) if state.get("locations") == "point" else None,
+                 state.get("hidden"))
+        mine = self._shape()
+        if (saved[2] != mine[2]) if heads_only else (saved != mine):
+            def words(shape):
+                kind, points, hidden = shape
+                where = f"{points} points" if kind == "point" else repr(kind)
+                return f"locations {where}, hidden {hidden}"
+            raise InputError(f"{source}: a primitive agent with {words(saved)}, not "
+                             f"{words(mine)}")
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
+
+
+def agent_for(cfg, encoder) -> PrimitiveAgent:
+    """The agent a PrimitiveTrainConfig describes (untrained heads) around `encoder`."""
+    return PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive, cfg.point_locations)
 
 
 def load_primitive_run(run_dir, checkpoint: str = ""):
@@ -147,7 +177,7 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
     encoder = load_encoder("corn", run_encoder_path(run_dir, cfg.encoder), cfg.allow_weak_encoder)
-    agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive)
+    agent = agent_for(cfg, encoder)
     agent.load_network_state(state["agent"], used)
     agent.eval()
     agent.checkpoint_file = used.name

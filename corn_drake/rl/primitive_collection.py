@@ -99,7 +99,8 @@ class PrimitiveCollector:
             obs = self.envs.reset()
             self._features, self._candidates = self.agent.features(obs)
             if self.hindsight is not None:
-                for slot, state in enumerate(achieved_states(obs)):
+                for slot, state in enumerate(achieved_states(obs,
+                                                             self.hindsight.rule.points_key)):
                     self.hindsight.begin(slot, state)
 
     def _keep_for_hindsight(self, step, features, locations, motions, target,
@@ -107,11 +108,12 @@ class PrimitiveCollector:
         """Adds this round's transitions to their episodes; returns the relabelled columns of
         the episodes that ended (and begins the envs' new ones)."""
         episodes, relabeled = self.hindsight, []
-        after = achieved_states(step.obs)
+        points = episodes.rule.points_key
+        after = achieved_states(step.obs, points)
         ended = sorted(step.final_obs)
         finals = dict(zip(ended, achieved_states(
             {k: np.stack([step.final_obs[i][k] for i in ended]) for k in
-             ("object_position", "goal", "object_keypoints")}))) if ended else {}
+             ("object_position", "goal", points)}, points))) if ended else {}
         stats = dict(zip(ended, step.episode_stats))  # both in env order
         for slot in range(len(locations)):
             episodes.add(slot, {k: v[slot] for k, v in features.items()}, locations[slot],

@@ -8,7 +8,9 @@ the policy clock period after period (each the teacher env's step: 8 physics ste
 executor is idle again, the task succeeds, the object leaves the workspace, the simulation
 fails, or the task's episode_steps run out. The reward is PrimitiveConfig.progress_reward times
 how much the primitive closed the mean distance between the object's bounding-box keypoints and
-the goal's (the paper's keypoints: position and the full 3-D orientation), plus turn_reward
+the goal's (the paper's keypoints: position and the full 3-D orientation; or, with
+reward_points "cloud", between its surface cloud's points and theirs at the goal), minus
+exit_penalty if the object left the workspace, plus turn_reward
 times how much it closed the rotation to the goal (rad; 0 by default), plus the task's
 success_reward on success; info["task_reward"] keeps the teacher's per-period rewards summed.
 
@@ -78,11 +80,16 @@ class PrimitiveEnv(DiagramEnv):
         the primitives (the evaluation diagram): step() then takes no action and advances one
         policy period, as the teacher's evaluation env does."""
         from corn_drake.builders.primitive import build_primitive_diagram
+        from corn_drake.config.choices import PRIMITIVE_REWARD_POINTS
 
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
         config.check()
         self.cfg, self.primitive_cfg = config, primitive or PrimitiveConfig()
+        if self.primitive_cfg.reward_points not in PRIMITIVE_REWARD_POINTS:
+            raise InputError(f"primitive.reward_points must be one of "
+                             f"{', '.join(PRIMITIVE_REWARD_POINTS)}, got "
+                             f"{self.primitive_cfg.reward_points!r}")
         self.handles = build_primitive_diagram(config, self.primitive_cfg, spec, meshcat, agent)
         super().__init__(self.handles.teacher, meshcat, agent_acts=True)
         self._agent_inside = agent is not None
@@ -138,7 +145,7 @@ class PrimitiveEnv(DiagramEnv):
         aim, normal = push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
         primitive = make_primitive(aim, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
-        distance_before, turn_before = self.keypoint_distance(), self.rotation_to_goal()
+        distance_before, turn_before = self.progress_distance(), self.rotation_to_goal()
         total, ticks = 0.0, 0
         while True:
             obs, reward, terminated, truncated, info = super().step(None)
@@ -158,11 +165,13 @@ class PrimitiveEnv(DiagramEnv):
                                   self.primitives >= self.primitive_cfg.max_primitives)
         info.update({"ticks": ticks, "reached": bool(status[STATUS_LAYOUT["reached"]] > 0),
                      "primitive": primitive, "task_reward": total})
-        reward = self.primitive_cfg.progress_reward * (distance_before - self.keypoint_distance())
+        reward = self.primitive_cfg.progress_reward * (distance_before - self.progress_distance())
         if self.primitive_cfg.turn_reward:
             reward += self.primitive_cfg.turn_reward * (turn_before - self.rotation_to_goal())
         if info["status"]["success"] > 0:
             reward += self.cfg.task.success_reward
+        elif info["status"]["out_of_workspace"] > 0:
+            reward -= self.primitive_cfg.exit_penalty
         elif not terminated and self._tipped():
             reward -= self.primitive_cfg.tip_penalty
             terminated, truncated = True, False
@@ -185,18 +194,33 @@ class PrimitiveEnv(DiagramEnv):
         return pose_errors(pose[:3], quat_wxyz_to_matrix(pose[3:]), goal[:3],
                            quat_wxyz_to_matrix(goal[3:]))[1]
 
+    def progress_distance(self) -> float:
+        """The distance the progress reward closes: keypoint_distance, or cloud_distance with
+        PrimitiveConfig.reward_points "cloud"."""
+        if self.primitive_cfg.reward_points == "cloud":
+            return self.cloud_distance()
+        return self.keypoint_distance()
+
     def keypoint_distance(self) -> float:
         """Mean distance (m) between the object's bounding-box keypoints now and at the goal
         (the reward's keypoints, systems/reward.keypoints_at: the height of the object's origin
         dropped, its tilt kept)."""
+        return self._distance_to_goal("object_keypoints")
+
+    def cloud_distance(self) -> float:
+        """The same over the points of the object's surface cloud (its body-frame points, as
+        the observation's cloud places them): the mean length of HACMan's goal flow."""
+        return self._distance_to_goal("object_cloud")
+
+    def _distance_to_goal(self, source: str) -> float:
         from corn_drake.systems.reward import keypoints_at
         from corn_drake.transforms import quat_wxyz_to_matrix
 
         pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
         R = quat_wxyz_to_matrix(pose[3:])
-        corners = self.handles.teacher.sources["object_keypoints"].get_source_value(
-            self.handles.teacher.sources["object_keypoints"].GetMyContextFromRoot(self.context)
-        ).value().reshape(-1, POSITION_DIM)
-        d = keypoints_at(corners, pose[:3], R) - keypoints_at(corners, goal[:3],
-                                                             quat_wxyz_to_matrix(goal[3:]))
+        system = self.handles.teacher.sources[source]
+        points = system.get_source_value(system.GetMyContextFromRoot(self.context)
+                                         ).value().reshape(-1, POSITION_DIM)
+        d = keypoints_at(points, pose[:3], R) - keypoints_at(points, goal[:3],
+                                                            quat_wxyz_to_matrix(goal[3:]))
         return float(np.linalg.norm(d, axis=1).mean())

@@ -35,7 +35,7 @@ from corn_drake.contract import RECENT_EPISODES
 from corn_drake.errors import InputError
 from corn_drake.rl.device import training_device
 from corn_drake.rl.hindsight import HindsightRule
-from corn_drake.rl.primitive_agent import PrimitiveAgent
+from corn_drake.rl.primitive_agent import agent_for
 from corn_drake.rl.primitive_collection import Exploration, PrimitiveTransitions
 from corn_drake.rl.replay import ReplayBuffer
 from corn_drake.rl.run_progress import recent_mean, run_env_factory, to_cpu
@@ -59,7 +59,7 @@ class PrimitiveTrainer:
         self.cfg, self.out = cfg, Path(out)
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
-        self.agent = PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive)
+        self.agent = agent_for(cfg, encoder)
         self.learner = TD3Learner(self.agent.actor, self.agent.critic, td3_settings(cfg),
                                   device=training_device(cfg.device), seed=cfg.seed)
         self.replay = ReplayBuffer(cfg.replay_capacity)
@@ -69,7 +69,8 @@ class PrimitiveTrainer:
         self._load()
         if self.global_step == 0 and cfg.init_from:
             self._start_from(cfg.init_from)
-        hindsight = HindsightRule.for_run(cfg.hindsight_goals, cfg.primitive, cfg.env.task)
+        hindsight = HindsightRule.for_run(cfg.hindsight_goals, cfg.primitive, cfg.env.task,
+                                          cfg.hindsight_exit_goals)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
                                   self.episodes // n_envs, cfg.primitive)
@@ -133,7 +134,7 @@ class PrimitiveTrainer:
         state = load_checkpoint(path, required=("agent",))
         if state is None:
             raise MissingInputError(f"--init-from {run}: no checkpoint ({path})")
-        self.agent.load_network_state(state["agent"], path)
+        self.agent.load_network_state(state["agent"], path, heads_only=True)
         self.learner.actor_target.load_state_dict(self.agent.actor.state_dict())
         self.learner.critic_target.load_state_dict(self.agent.critic.state_dict())
 

@@ -35,7 +35,7 @@ from corn_drake.timing import PolicyClock
 
 def num_locations(agent, num_points: int) -> int:
     """How many candidate locations the agent scores per observation of `num_points` points."""
-    return agent.encoder.network.num_patches if agent.locations == "patch" else num_points
+    return agent.location_count(num_points)
 
 
 class PrimitivePolicySystem(LeafSystem):
