@@ -1,5 +1,6 @@
 """Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
-push policy, with hindsight goals (items 13-18 of README.md) and without (the table's rows).
+push policy, with hindsight goals (items 13-18 of README.md) and without (the table's rows); and
+variant_curves.png: the variants of the low-push hindsight run on push_turn (items 20-24).
 
     .venv/bin/python docs/results/primitive/plot_hindsight_curves.py
 
@@ -25,12 +26,25 @@ RUNS = {  # label -> history file, drawn in this order (same colour per task, da
     "full6d + hindsight goals": ("train_history_full6d_hindsight.json", "tab:green", "-"),
 }
 
+VARIANTS = {  # item 15's run and what items 20-24 changed in it, each to 12,000 primitives
+    "low pushes (item 15)": ("train_history_push_turn_hindsight_low_push.json", "tab:red", "-"),
+    "64 point locations": ("train_history_push_turn_hindsight_point64.json", "tab:blue", "-"),
+    "cloud-point reward": ("train_history_push_turn_hindsight_cloud_reward.json", "tab:green",
+                           "-"),
+    "no exit goals": ("train_history_push_turn_hindsight_no_exit_goals.json", "tab:gray", "-"),
+    "no exit goals + exit penalty": ("train_history_push_turn_hindsight_exit_penalty.json",
+                                     "tab:brown", "-"),
+    "no exit goals + short pushes, 15 primitives": (
+        "train_history_push_turn_hindsight_short_push.json", "tab:purple", "-"),
+}
 
-def main() -> None:
+
+def draw(runs: dict, out: str, until: int | None = None) -> None:
     fig = Figure(figsize=(9, 3.2))
     success, q = fig.subplots(1, 2)
-    for label, (name, colour, style) in RUNS.items():
-        rows = json.loads((HERE / name).read_text())["history"]
+    for label, (name, colour, style) in runs.items():
+        rows = [r for r in json.loads((HERE / name).read_text())["history"]
+                if until is None or r["step"] <= until]
         steps = [r["step"] for r in rows]
         success.plot(steps, [r["success_rate"] for r in rows], style, color=colour, label=label)
         q.plot(steps, [r["q_mean"] if r["q_mean"] is not None else float("nan") for r in rows],
@@ -40,7 +54,12 @@ def main() -> None:
     q.set(xlabel="primitives", ylabel="critic mean Q at taken locations")
     success.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(HERE / "hindsight_curves.png", dpi=100)
+    fig.savefig(HERE / out, dpi=100)
+
+
+def main() -> None:
+    draw(RUNS, "hindsight_curves.png")
+    draw(VARIANTS, "variant_curves.png", until=12000)
 
 
 if __name__ == "__main__":
