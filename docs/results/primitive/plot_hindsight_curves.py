@@ -24,6 +24,8 @@ RUNS = {  # label -> history file, drawn in this order (same colour per task, da
     "push_turn from scratch": ("train_history_push_turn_from_scratch.json", "tab:purple", "--"),
     "full6d": ("train_history_full6d.json", "tab:green", "--"),
     "full6d + hindsight goals": ("train_history_full6d_hindsight.json", "tab:green", "-"),
+    "full6d + hindsight goals, 10 cm pushes": ("train_history_full6d_hindsight_short_push.json",
+                                               "tab:olive", "-"),
 }
 
 VARIANTS = {  # item 15's run and what items 20-24 changed in it, each to 12,000 primitives
