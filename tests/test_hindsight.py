@@ -246,3 +246,12 @@ def test_the_push_that_left_the_workspace_loses_the_exit_penalty_in_every_copy()
     np.testing.assert_allclose(penalised["rewards"][thrown], plain["rewards"][thrown] - 0.7,
                                atol=1e-6)
     np.testing.assert_array_equal(penalised["rewards"][~thrown], plain["rewards"][~thrown])
+
+
+def test_an_unknown_reward_points_choice_is_refused_by_the_run_and_the_env():
+    with pytest.raises(InputError, match="primitive.reward_points must be one of keypoints, "
+                                         "cloud, got 'flow'"):
+        _cfg(hindsight_goals=0, primitive=PrimitiveConfig(reward_points="flow")).check()
+    with pytest.raises(InputError, match="reward_points.*'corners'"):
+        PrimitiveEnv(load_primitive_env_config("push_turn"),
+                     PrimitiveConfig(reward_points="corners"))

@@ -121,6 +121,15 @@ class PrimitiveConfig:
     finger_tilt_deg: float = 0.0
 
 
+def check_reward_points(primitive: PrimitiveConfig) -> None:
+    """InputError unless `primitive.reward_points` is one the env knows (the run's config and a
+    PrimitiveEnv built from a PrimitiveConfig alone both ask)."""
+    if primitive.reward_points not in PRIMITIVE_REWARD_POINTS:
+        raise InputError(f"primitive.reward_points must be one of "
+                         f"{', '.join(PRIMITIVE_REWARD_POINTS)}, got "
+                         f"{primitive.reward_points!r}")
+
+
 @dc.dataclass
 class PrimitiveTrainConfig(RunSettings):
     """A primitive training run (rl/primitive_trainer.py). total_steps counts primitives (one
@@ -188,10 +197,7 @@ class PrimitiveTrainConfig(RunSettings):
     def check(self) -> None:
         """InputError naming the first field a run cannot start with (the env's too)."""
         check_bounds(self)  # nested configs too (primitive, env)
-        if self.primitive.reward_points not in PRIMITIVE_REWARD_POINTS:
-            raise InputError(f"primitive.reward_points must be one of "
-                             f"{', '.join(PRIMITIVE_REWARD_POINTS)}, got "
-                             f"{self.primitive.reward_points!r}")
+        check_reward_points(self.primitive)
         if self.locations not in PRIMITIVE_LOCATIONS:
             raise InputError(f"locations must be one of {', '.join(PRIMITIVE_LOCATIONS)}, got "
                              f"{self.locations!r}")

@@ -33,7 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 from corn_drake.config.diagram_files import load_teacher_config
-from corn_drake.config.primitive import PrimitiveConfig
+from corn_drake.config.primitive import PrimitiveConfig, check_reward_points
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
@@ -80,16 +80,12 @@ class PrimitiveEnv(DiagramEnv):
         the primitives (the evaluation diagram): step() then takes no action and advances one
         policy period, as the teacher's evaluation env does."""
         from corn_drake.builders.primitive import build_primitive_diagram
-        from corn_drake.config.choices import PRIMITIVE_REWARD_POINTS
 
         if config is None or isinstance(config, (str, Path)):
             config = load_teacher_config(config)
         config.check()
         self.cfg, self.primitive_cfg = config, primitive or PrimitiveConfig()
-        if self.primitive_cfg.reward_points not in PRIMITIVE_REWARD_POINTS:
-            raise InputError(f"primitive.reward_points must be one of "
-                             f"{', '.join(PRIMITIVE_REWARD_POINTS)}, got "
-                             f"{self.primitive_cfg.reward_points!r}")
+        check_reward_points(self.primitive_cfg)
         self.handles = build_primitive_diagram(config, self.primitive_cfg, spec, meshcat, agent)
         super().__init__(self.handles.teacher, meshcat, agent_acts=True)
         self._agent_inside = agent is not None
