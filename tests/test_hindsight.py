@@ -118,7 +118,7 @@ def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward(reward_points)
                                           ("object_position", "goal", key)}, key)
                          for o in (obs, nxt))
     goal = _own_goal(obs, key)
-    np.testing.assert_allclose(_own_goal(nxt, key).keypoints, goal.keypoints, atol=1e-5)
+    np.testing.assert_allclose(_own_goal(nxt, key).points, goal.points, atol=1e-5)
     # The goal relative to each state, as its observation holds it.
     for state, o in ((before, obs), (after, nxt)):
         position, rotation = relative_goal(state, goal)
@@ -130,7 +130,7 @@ def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward(reward_points)
     assert reached > env.cfg.task.success_reward
     assert reached == pytest.approx(
         rule.success_reward + rule.progress_reward * float(np.linalg.norm(
-            before.keypoints - after.keypoints, axis=1).mean()) + rule.turn_reward * float(
+            before.points - after.points, axis=1).mean()) + rule.turn_reward * float(
             np.arccos(np.clip((np.trace(after.goal_rotation.T @ before.goal_rotation) - 1) / 2,
                               -1, 1))), abs=1e-6)
 

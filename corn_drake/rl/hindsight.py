@@ -86,7 +86,7 @@ class Achieved:
     systems/reward.keypoints_at)."""
     position: np.ndarray  # (3,)
     goal_rotation: np.ndarray  # (3, 3)
-    keypoints: np.ndarray  # (8, 3) corners, or (N, 3) cloud points
+    points: np.ndarray  # (8, 3) box corners, or (N, 3) cloud points
 
 
 def achieved_states(obs: dict[str, np.ndarray],
@@ -94,10 +94,10 @@ def achieved_states(obs: dict[str, np.ndarray],
     """One Achieved per row of a batch of primitive-env observations, its points from
     `points_key` (HindsightRule.points_key)."""
     states = []
-    for position, goal, keypoints in zip(obs["object_position"], obs["goal"],
-                                         obs[points_key]):
+    for position, goal, body_points in zip(obs["object_position"], obs["goal"],
+                                           obs[points_key]):
         position = np.asarray(position, np.float64)
-        points = np.asarray(keypoints, np.float64).reshape(-1, POSITION_DIM).copy()
+        points = np.asarray(body_points, np.float64).reshape(-1, POSITION_DIM).copy()
         points[:, 2] -= position[2]
         states.append(Achieved(position, from_pose9(goal)[1], points))
     return states
@@ -112,7 +112,7 @@ def relative_goal(state: Achieved, goal: Achieved) -> tuple[np.ndarray, np.ndarr
 def points_distance(state: Achieved, goal: Achieved) -> float:
     """Mean distance between the reward's points at `state` and at `goal` (PrimitiveEnv's
     progress_distance)."""
-    return float(np.linalg.norm(state.keypoints - goal.keypoints, axis=1).mean())
+    return float(np.linalg.norm(state.points - goal.points, axis=1).mean())
 
 
 def rotation_to(state: Achieved, goal: Achieved) -> float:
@@ -180,8 +180,8 @@ class HindsightEpisodes:
         exited = steps[-1].terminated and not succeeded_
         last_goal = len(steps) - 1 if exited and not self.rule.exit_goals else len(steps)
         rows = []
-        for t, step in enumerate(steps):
-            ended_otherwise = step.terminated and t == len(steps) - 1 and not succeeded_
+        for t in range(len(steps)):
+            ended_otherwise = exited and t == len(steps) - 1
             if t + 1 > last_goal:
                 continue  # no later pose within the workspace to take as a goal
             for j in rng.integers(t + 1, last_goal + 1, size=self.rule.goals):

@@ -151,12 +151,12 @@ class PrimitiveCollector:
                      for k in step.final_obs[ended[0]]})
                 for key in target:
                     target[key][ended] = final[key]
-            parts.append((_numpy(features), np.asarray(locations), motions,
-                          np.asarray(step.rewards), np.asarray(step.terminated),
-                          _numpy(target)))
+            acted_in, locations, led_to = _numpy(features), np.asarray(locations), _numpy(target)
+            parts.append((acted_in, locations, motions, np.asarray(step.rewards),
+                          np.asarray(step.terminated), led_to))
             if self.hindsight is not None:
-                relabeled.extend(self._keep_for_hindsight(step, *parts[-1][:3], parts[-1][5],
-                                                          rng))
+                relabeled.extend(self._keep_for_hindsight(step, acted_in, locations, motions,
+                                                          led_to, rng))
             stats.extend(step.episode_stats)
             self._features, self._candidates = next_features, next_candidates
 
