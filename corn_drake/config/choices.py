@@ -12,8 +12,9 @@ STUDENT_ACTIONS = ("mean", "sample")
 # The contact-primitive policy's candidate locations: the encoder's 16 patch centres ("patch"), or
 # cloud points ("point": PrimitiveTrainConfig.point_locations of them, farthest-point spread, each
 # with its nearest patch's token). Every point of a 512-point cloud is allowed but costs 32x the
-# patch policy's replay (~10 KB per transition) and update time: 64 points cost ~3.3x the update
-# (95 vs 29 ms measured on this machine, batch 64), 128 points ~6.7x.
+# patch policy's replay (~10 KB per transition) and update time: 64 points cost 3.5x the update
+# (`bench primitive`, back to back: 98.8 vs 28.6 ms, batch 64; docs/results/primitive/), 128
+# points ~6.7x (an ad-hoc timing).
 PRIMITIVE_LOCATIONS = ("patch", "point")
 # The body points the primitive env's progress reward measures the distance to the goal on
 # (PrimitiveConfig.reward_points): the bounding-box corners, or the object's surface cloud.

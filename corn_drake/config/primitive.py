@@ -146,7 +146,7 @@ class PrimitiveTrainConfig(RunSettings):
     # with their tokens, or "point", `point_locations` cloud points spread by farthest-point
     # sampling (the first 16 are the patch centres), each with its nearest patch's token
     # (config/choices.py PRIMITIVE_LOCATIONS has their cost). Measured on push_turn with
-    # hindsight goals: 64 points 0.220 against 0.245-0.295 for the patch centres at 3.3x the
+    # hindsight goals: 64 points 0.220 against 0.245-0.295 for the patch centres at 3.5x the
     # update time (docs/results/primitive/, item 19), hence "patch" by default.
     locations: str = "patch"
     point_locations: int = 64
