@@ -26,7 +26,26 @@ def machine_info() -> dict[str, Any]:
         info["load_average_at_start"] = os.getloadavg()
     except OSError:
         pass
+    info.update(core_topology())
     return info
+
+
+def core_topology() -> dict[str, int]:
+    """How many physical cores this process's usable CPUs are (Linux sysfs; {} elsewhere):
+    two hyper-threads of one core share it, so N busy workers on N CPUs that are N / 2 cores
+    each run at well under one core's pace."""
+    try:
+        cpus = sorted(os.sched_getaffinity(0))
+        cores = set()
+        for cpu in cpus:
+            topology = f"/sys/devices/system/cpu/cpu{cpu}/topology"
+            with open(f"{topology}/physical_package_id") as f:
+                package = f.read().strip()
+            with open(f"{topology}/core_id") as f:
+                cores.add((package, f.read().strip()))
+    except (OSError, AttributeError):
+        return {}
+    return {"usable_cpus": len(cpus), "physical_cores": len(cores)}
 
 
 def write_report(path: str, name: str, results: dict[str, Any]) -> dict[str, Any]:

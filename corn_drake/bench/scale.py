@@ -69,6 +69,9 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu",
                         help="torch device of the learner (agent, batched inference, PPO "
                              "update): cpu, cuda or cuda:N; the envs run on the CPU")
+    parser.add_argument("--pin-workers", action="store_true",
+                        help="run worker w on core w + 1 alone (rl/core_pinning.py), as "
+                             "`train --pin-workers`")
 
 
 def instrument_rollouts(trainer, timer, segments: list) -> None:
@@ -129,7 +132,8 @@ def measure(args, env_cfg, workers: int) -> dict:
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
 
-    cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device)
+    cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device,
+                       args.pin_workers)
     timer, segments = PhaseTimer(), []
     with _RaySession():
         trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
@@ -243,6 +247,7 @@ def run(args) -> dict:
         "rollout_steps": args.rollout_steps,
         "device": str(device),
         "device_name": device_name(device),
+        "pinned_workers": args.pin_workers,
         "usable_cpus": cpus,
         "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),

@@ -84,6 +84,9 @@ class RunSettings:
     seed: int = 0
     checkpoint_every: int = 5  # updates (train) or optimiser steps (distill) between checkpoints
     ray_address: str = ""  # a Ray cluster's address; empty: a local Ray
+    # Pin Ray worker w to core w + 1 of its node's usable cores (rl/core_pinning.py; Linux).
+    # For many-core machines; measured by `bench cores` and `bench scale --pin-workers`.
+    pin_workers: bool = False
     # The pretrained encoder checkpoint the policy uses (train: frozen, for corn / pn / p2v-lite
     # / rot; distill: the student's patch encoder starts from it).
     encoder: str = ""

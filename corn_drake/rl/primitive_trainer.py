@@ -82,7 +82,7 @@ class PrimitiveTrainer:
             init_ray(cfg.ray_address or None)
             self.workers = RayPrimitiveCollectors(factory, cfg.workers, cfg.envs_per_worker,
                                                   self.agent, cfg.seed, self.global_step,
-                                                  hindsight)
+                                                  hindsight, pin=cfg.pin_workers)
         else:
             from corn_drake.rl.primitive_collection import PrimitiveCollector
             from corn_drake.rl.vec_env import EnvBatch

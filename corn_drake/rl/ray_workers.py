@@ -20,7 +20,11 @@ from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
 
 @ray.remote(num_cpus=1)
 class RolloutWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int):
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int,
+                 pin_index: int | None = None):
+        from corn_drake.rl.core_pinning import pin_worker
+
+        pin_worker(pin_index)  # None: unpinned
         self.batch = EnvBatch(factory, num_envs, first_index)
 
     def reset(self):
@@ -86,17 +90,19 @@ def _start_reaper(pids: list[int]) -> None:
 
 
 class RayEnvBatch:
-    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int):
+    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int,
+                 pin: bool = False):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
-        self.factory, self.envs_per_worker = factory, envs_per_worker
+        self.factory, self.envs_per_worker, self.pin = factory, envs_per_worker, pin
         self.workers = [self._spawn(w) for w in range(num_workers)]
         self.restarts = 0
 
     def _spawn(self, w: int):
         # num_cpus=0 on the actor handle: we may run more workers than cores (one-core machines).
         return RolloutWorker.options(num_cpus=0).remote(self.factory, self.envs_per_worker,
-                                                        w * self.envs_per_worker)
+                                                        w * self.envs_per_worker,
+                                                        w if self.pin else None)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker

@@ -33,9 +33,13 @@ MAX_REPLACEMENTS_PER_UPDATE = 3
 
 @ray.remote(num_cpus=1)
 class SegmentWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent):
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
+                 pin_index: int | None = None):
         import torch
 
+        from corn_drake.rl.core_pinning import pin_worker
+
+        pin_worker(pin_index)  # None: unpinned
         # One core per worker: its inference must not spread threads over the others' cores.
         torch.set_num_threads(1)
         self.collector = SegmentCollector(EnvBatch(factory, num_envs, first_index), agent, "cpu")
@@ -55,12 +59,14 @@ class SegmentWorker:
 
 class RaySegmentCollectors:
     """`num_workers` SegmentWorkers of `envs_per_worker` envs each, looking like one
-    SegmentCollector over all their envs (worker 0's first)."""
+    SegmentCollector over all their envs (worker 0's first); `pin`: worker w runs on core w + 1
+    (rl/core_pinning.py)."""
 
-    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent):
+    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
+                 pin: bool = False):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
-        self.factory, self.envs_per_worker = factory, envs_per_worker
+        self.factory, self.envs_per_worker, self.pin = factory, envs_per_worker, pin
         # The agent's architecture travels once, at spawn; weights come with every update.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
         self.workers = [self._spawn(w) for w in range(num_workers)]
@@ -71,7 +77,8 @@ class RaySegmentCollectors:
     def _spawn(self, w: int):
         # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
         return SegmentWorker.options(num_cpus=0).remote(
-            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent)
+            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent,
+            w if self.pin else None)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker

@@ -104,7 +104,8 @@ class Trainer:
             from corn_drake.rl.segment_workers import RaySegmentCollectors
 
             init_ray(cfg.ray_address or None)
-            return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent)
+            return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent,
+                                        pin=cfg.pin_workers)
         return SegmentCollector(EnvBatch(factory, cfg.envs_per_worker), self.agent, self.device)
 
     @property
