@@ -54,6 +54,7 @@ from corn_drake.contract import (ACTION_DIM, ACTION_SLICES, NUM_JOINTS, PRIMITIV
 from corn_drake.contract import PRIMITIVE_STATUS_DIM as STATUS_DIM
 from corn_drake.contract import PRIMITIVE_STATUS_LAYOUT as STATUS_LAYOUT
 from corn_drake.scene.objects import TABLE_TOP_Z
+from corn_drake.systems.edge_push import push_kept_on_table
 from corn_drake.systems.observations import ObservationLayout
 from corn_drake.timing import PolicyClock
 from corn_drake.transforms import from_pose9
@@ -149,8 +150,12 @@ class PrimitivePlanner:
     """The executor's tick as plain numpy: `plan(memory, tool_p, tool_R, top_z, primitive)` ->
     (next memory, action). Kept apart from the LeafSystem so tests can drive it directly."""
 
-    def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig):
+    def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig,
+                 table_half_xy=None):
+        if cfg.keep_on_table and table_half_xy is None:
+            raise ValueError("primitive.keep_on_table needs the table's size")
         self.cfg, self.controller = cfg, controller
+        self._table_half_xy = None if table_half_xy is None else np.asarray(table_half_xy, float)
         self._tilt = np.deg2rad(cfg.finger_tilt_deg)
         self._gains = np.concatenate([np.full(NUM_JOINTS, cfg.stiffness),
                                       np.full(NUM_JOINTS, cfg.damping)])
@@ -169,7 +174,8 @@ class PrimitivePlanner:
         pre[2] = max(pre[2], TABLE_TOP_Z + self.cfg.min_tool_height)
         return pre
 
-    def _start(self, m: np.ndarray, primitive: np.ndarray, top_z: float) -> None:
+    def _start(self, m: np.ndarray, primitive: np.ndarray, top_z: float,
+               object_xy=None) -> None:
         cfg = self.cfg
         pre = self.pre_contact(primitive[PRIMITIVE_POINT], primitive[PRIMITIVE_NORMAL])
         m[_PHASE], m[_TICKS], m[_APPROACH_TICKS] = APPROACH, 0, 0
@@ -178,6 +184,11 @@ class PrimitivePlanner:
         m[_PRE] = pre
         m[_PUSH] = np.clip(primitive[PRIMITIVE_MOTION], -1.0, 1.0) * cfg.push_distance * \
             np.array([1.0, 1.0, cfg.vertical_push])
+        if cfg.keep_on_table:
+            if object_xy is None:
+                raise ValueError("primitive.keep_on_table needs the object's position")
+            m[_PUSH] = push_kept_on_table(m[_PUSH], object_xy, self._table_half_xy,
+                                          cfg.table_margin, cfg.pre_contact_distance)
         m[_Z_SAFE] = max(top_z, pre[2]) + cfg.clearance
         normal = np.asarray(primitive[PRIMITIVE_NORMAL], float)
         horizontal = np.linalg.norm(normal[:2])
@@ -193,14 +204,15 @@ class PrimitivePlanner:
         m[_PHASE], m[_TICKS] = phase, 0
 
     def plan(self, memory: np.ndarray, tool_p: np.ndarray, tool_R: np.ndarray, top_z: float,
-             primitive) -> tuple[np.ndarray, np.ndarray]:
-        """`primitive`: a callable giving the primitive input (evaluated only when idle)."""
+             primitive, object_xy=None) -> tuple[np.ndarray, np.ndarray]:
+        """`primitive`: a callable giving the primitive input (evaluated only when idle);
+        `object_xy`: the object's centre (needed with keep_on_table)."""
         cfg, m = self.cfg, np.array(memory, float)
         tol = cfg.reach_tolerance
         if m[_PHASE] == IDLE:
             offered = np.asarray(primitive(), float)
             if round(offered[PRIMITIVE_SEQUENCE]) == round(m[_COUNT]) + 1:
-                self._start(m, offered, top_z)
+                self._start(m, offered, top_z, object_xy)
         # Transitions that depend on where the tool is now (checked before commanding).
         if m[_PHASE] == APPROACH:
             above = np.array([m[_PRE][0], m[_PRE][1], m[_Z_SAFE]])
@@ -283,9 +295,11 @@ class PrimitiveExecutor(LeafSystem):
     Outputs: `action` (ACTION_DIM, to ActionToJointTargets), `status` (STATUS_DIM)."""
 
     def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig, clock: PolicyClock,
-                 num_points: int):
+                 num_points: int, table_size=None):
         super().__init__()
-        self.planner = PrimitivePlanner(cfg, controller)
+        # table_size: the scene's (x, y, z) table box, centred on the origin (keep_on_table).
+        self.planner = PrimitivePlanner(
+            cfg, controller, None if table_size is None else np.asarray(table_size[:2]) / 2)
         self._layout = ObservationLayout(num_points)
         self._obs = self.DeclareVectorInputPort("observation", self._layout.size)
         self._primitive = self.DeclareVectorInputPort("primitive", PRIMITIVE_DIM)
@@ -310,9 +324,11 @@ class PrimitiveExecutor(LeafSystem):
         obs = self._obs.Eval(context)
         s = self._layout.slices
         tool_p, tool_R = from_pose9(obs[s["hand_state"]])
+        keypoints = np.asarray(obs[s["object_keypoints"]]).reshape(-1, 3)
         value.set_value(self.planner.plan(
             context.get_discrete_state(self._memory).value(), tool_p, tool_R,
-            top_height(obs[s["object_keypoints"]]), lambda: self._primitive.Eval(context)))
+            top_height(keypoints), lambda: self._primitive.Eval(context),
+            keypoints[:, :2].mean(axis=0)))
 
     def _update(self, context, discrete_state):
         discrete_state.set_value(self._memory, self._plan.Eval(context)[0])
