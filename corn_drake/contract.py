@@ -142,8 +142,9 @@ PRIMITIVE_LOCATION, PRIMITIVE_SEQUENCE = 9, 10
 # the pre-contact pose was reached (1, 0, or -1 while pending), the current primitive's cloud
 # index, its pre-contact point and the last commanded tool target.
 PRIMITIVE_STATUS_LAYOUT = {"phase": 0, "ticks": 1, "count": 2, "reached": 3, "location": 4,
-                           "pre_contact": slice(5, 8), "target": slice(8, 11)}
-PRIMITIVE_STATUS_DIM = 11
+                           "pre_contact": slice(5, 8), "target": slice(8, 11),
+                           "push": slice(11, 14)}
+PRIMITIVE_STATUS_DIM = 14
 # PrimitivePolicySystem's held `choice`: cloud index, location index, motion (3).
 PRIMITIVE_CHOICE_DIM = 5
 # Per-location features beside the token: position from the object's origin, goal flow,

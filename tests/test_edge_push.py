@@ -86,3 +86,34 @@ def test_a_real_push_toward_the_edge_stops_short_of_it_only_with_the_option():
     # the tool stops): the centre stays within 1.5 cm of the margin's line.
     assert kept <= limit + 0.015
     assert free > kept + 0.02  # the full push carries it much further
+
+
+def test_the_view_draws_the_shortened_push_the_executor_ran():
+    """The arrow ends where the executor's push ends: motion x push_distance shortened for the
+    edge (computed here from the observation's box corners), not the motion as sent."""
+    from pydrake.geometry import Meshcat
+
+    from corn_drake.viz.primitive_view import primitive_path
+    from tests.test_primitive_executor import _animations, _status
+
+    cfg = load_primitive_env_config("push")
+    cfg.scene.table_size = [TABLE_X, *cfg.scene.table_size[1:]]
+    meshcat = Meshcat()
+    primitive = PrimitiveConfig(keep_on_table=True, table_margin=MARGIN)
+    env = PrimitiveEnv(cfg, primitive, meshcat=meshcat)
+    obs, _ = env.reset(seed=4)
+    sign = 1.0 if obs["object_position"][0] >= 0 else -1.0
+    index = int(np.argmin(sign * obs["normals"][:, 0] + 3 * np.abs(obs["normals"][:, 2])))
+    motion = np.array([sign, 0.0, 0.0])
+    centre = obs["object_keypoints"].reshape(-1, 3)[:, :2].mean(axis=0)
+    env.step({"point": index, "motion": motion})
+    status = _status(env)
+    expected = push_kept_on_table(motion * primitive.push_distance, centre,
+                                  np.asarray(cfg.scene.table_size[:2]) / 2,
+                                  MARGIN, primitive.pre_contact_distance)
+    assert np.linalg.norm(expected) < 0.9 * primitive.push_distance  # it was shortened
+    np.testing.assert_allclose(status["push"], expected, atol=1e-9)
+    view = env.diagram.GetSubsystemByName("primitive_view")
+    _, _, places = _animations(meshcat.StaticHtml(), view.path)
+    np.testing.assert_allclose(places[f"{primitive_path(view.path, 1)}/arrow/head"],
+                               status["pre_contact"] + expected, atol=1e-6)

@@ -282,6 +282,7 @@ def memory_status(memory: np.ndarray) -> np.ndarray:
     out[3], out[4] = memory[_REACHED], memory[_LOCATION]
     out[STATUS_LAYOUT["pre_contact"]] = memory[_PRE]
     out[STATUS_LAYOUT["target"]] = memory[_TARGET]
+    out[STATUS_LAYOUT["push"]] = memory[_PUSH]  # as executed (vertical_push, keep_on_table)
     return out
 
 

@@ -3,14 +3,15 @@
 For every primitive the executor starts it draws, under `<path>/primitive_NNN` (NNN: the
 executor's count of primitives started, 1 for the first):
   contact  a small red sphere at the chosen contact point;
-  arrow    the push, from the pre-contact point (the executor's status) to where the push ends
-           (pre-contact + motion x PrimitiveConfig.push_distance);
+  arrow    the push as the executor runs it, from the pre-contact point to where the push ends
+           (both from the executor's status: the motion scaled by push_distance and
+           vertical_push, shortened near the table's edge with keep_on_table);
   scores   with a policy in the diagram: the object's cloud coloured viridis by the policy's score
            of each point's candidate location (its nearest patch centre; every point is its own
            location when the policy scores points), lowest dark purple, highest yellow.
-Where the contact point and the motion come from: with a policy, its held `choice` (cloud index
-and motion, recorded at the tick the executor took the primitive) and the cloud; without one
-(the gymnasium env), the executor's `primitive` input, which the env fixes for each primitive.
+Where the contact point comes from: with a policy, its held `choice` (the cloud index, recorded
+at the tick the executor took the primitive) and the cloud; without one (the gymnasium env), the
+executor's `primitive` input, which the env fixes for each primitive.
 
 Timing: the view looks at the executor's status at every policy boundary, where a publish sees
 the state before that boundary's update: a count that went up since the last look means a
@@ -34,8 +35,8 @@ from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 
 from corn_drake.contract import POSITION_DIM
-from corn_drake.systems.primitive_executor import (PRIMITIVE_DIM, PRIMITIVE_MOTION,
-                                                   PRIMITIVE_POINT, STATUS_DIM, STATUS_LAYOUT)
+from corn_drake.systems.primitive_executor import (PRIMITIVE_DIM, PRIMITIVE_POINT, STATUS_DIM,
+                                                   STATUS_LAYOUT)
 from corn_drake.timing import PolicyClock
 from corn_drake.viz.attention_view import viridis_rgb
 
@@ -83,13 +84,13 @@ class PrimitiveView(LeafSystem):
     either `choice` (the policy's CHOICE_DIM) and `scores` (its L location scores), when
     `num_locations` is given, or `primitive` (the executor's PRIMITIVE_DIM input)."""
 
-    def __init__(self, meshcat: Meshcat, clock: PolicyClock, push_distance: float,
-                 num_points: int, num_locations: int | None = None, path: str = DEFAULT_PATH):
+    def __init__(self, meshcat: Meshcat, clock: PolicyClock, num_points: int,
+                 num_locations: int | None = None, path: str = DEFAULT_PATH):
         super().__init__()
         from corn_drake.systems.primitive_policy import CHOICE_DIM
 
         self._meshcat, self._clock, self._path = meshcat, clock, path
-        self._push_distance, self._num_points = float(push_distance), num_points
+        self._num_points = num_points
         self._num_locations = num_locations
         self._status = self.DeclareVectorInputPort("executor_status", STATUS_DIM)
         self._cloud = self.DeclareVectorInputPort("cloud", POSITION_DIM * num_points)
@@ -136,20 +137,17 @@ class PrimitiveView(LeafSystem):
 
     def _draw(self, here: str, context, status: np.ndarray, cloud: np.ndarray) -> None:
         if self._num_locations is None:
-            primitive = self._primitive.Eval(context)
-            contact, motion = primitive[PRIMITIVE_POINT], primitive[PRIMITIVE_MOTION]
+            contact = self._primitive.Eval(context)[PRIMITIVE_POINT]
         else:
             choice = self._choice.Eval(context)
             index = int(round(choice[0]))
             contact = cloud[index] if 0 <= index < len(cloud) else None
-            motion = choice[2:5]
             self._draw_scores(f"{here}/scores", cloud, self._scores.Eval(context))
         if contact is not None:
             self._meshcat.SetObject(f"{here}/contact", Sphere(CONTACT_RADIUS), CONTACT_RGBA)
             self._meshcat.SetTransform(f"{here}/contact", RigidTransform(np.asarray(contact)))
-        pre = status[STATUS_LAYOUT["pre_contact"]]
-        push = np.clip(motion, -1.0, 1.0) * self._push_distance
-        self._draw_arrow(f"{here}/arrow", pre, push)
+        self._draw_arrow(f"{here}/arrow", status[STATUS_LAYOUT["pre_contact"]],
+                         status[STATUS_LAYOUT["push"]])
 
     def _draw_arrow(self, path: str, start: np.ndarray, push: np.ndarray) -> None:
         length = float(np.linalg.norm(push))
@@ -191,7 +189,7 @@ def add_primitive_view(builder, handles, meshcat: Meshcat, clock: PolicyClock,
     policy = handles.policy
     num_locations = None if policy is None else policy.GetOutputPort("scores").size()
     view = builder.AddNamedSystem("primitive_view", PrimitiveView(
-        meshcat, clock, handles.executor.planner.cfg.push_distance, num_points, num_locations,
+        meshcat, clock, num_points, num_locations,
         path))
     builder.Connect(handles.executor.GetOutputPort("status"), view.GetInputPort("executor_status"))
     builder.Connect(cloud, view.GetInputPort("cloud"))
