@@ -105,3 +105,20 @@ def test_primitive_and_lock_step_workers_are_pinned_when_asked(tmp_path, local_r
     os.kill(batch.worker_pids()[0], signal.SIGKILL)
     batch.step(np.zeros((2, 20)))
     assert batch.restarts == 1 and _affinities(batch.worker_pids()) == expected
+
+
+def test_pin_workers_is_recorded_and_may_change_on_a_resume(tmp_path, capsys):
+    """Which cores the workers run on does not change what a run learns: `--pin-workers` on a
+    resume is taken, not refused, and the run's config records it."""
+    from corn_drake.cli import main
+    from corn_drake.run_folders.config_file import load_run_config
+
+    run = tmp_path / "run"
+    common = ["train", "--policy", "state", "--envs-per-worker", "1", "--rollout-steps", "4",
+              "--set", "task.episode_steps=5", "--no-progress", "--out", str(run)]
+    assert main([*common, "--steps", "4"]) == 0
+    assert load_run_config(run).pin_workers is False
+    capsys.readouterr()
+    assert main([*common, "--steps", "8", "--pin-workers"]) == 0
+    assert "pin_workers" in capsys.readouterr().out
+    assert load_run_config(run).pin_workers is True
