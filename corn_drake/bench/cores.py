@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 
 from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.bench.scale import worker_counts  # the same list rules as bench scale's --workers
 from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 NAME = "cores"
@@ -37,15 +38,8 @@ HELP = ("the machine's own ceiling for N rollout workers (no Ray, no learner): e
 PIN_MODES = {"off": (False,), "on": (True,), "both": (False, True)}
 
 
-def process_counts(text: str) -> list[int]:
-    """'1,15' -> [1, 15] (argparse type, errors name --procs); 1 is added by run()."""
-    from corn_drake.bench.scale import worker_counts
-
-    return worker_counts(text)
-
-
 def add_arguments(parser):
-    parser.add_argument("--procs", type=process_counts, default="1,2",
+    parser.add_argument("--procs", type=worker_counts, default="1,2",
                         help="comma-separated process counts, e.g. 1,8,15 (1, the baseline, is "
                              "measured even when left out)")
     parser.add_argument("--envs-per-worker", type=positive_int, default=8,

@@ -33,11 +33,10 @@ def machine_info() -> dict[str, Any]:
 def core_topology() -> dict[str, int]:
     """How many physical cores this process's usable CPUs are (Linux sysfs; {} elsewhere):
     two hyper-threads of one core share it, so N busy workers on N CPUs that are N / 2 cores
-    each run at well under one core's pace."""
+    each run at well under one core's pace. (The benchmarks' results give the usable CPUs.)"""
     try:
-        cpus = sorted(os.sched_getaffinity(0))
         cores = set()
-        for cpu in cpus:
+        for cpu in os.sched_getaffinity(0):
             topology = f"/sys/devices/system/cpu/cpu{cpu}/topology"
             with open(f"{topology}/physical_package_id") as f:
                 package = f.read().strip()
@@ -45,7 +44,7 @@ def core_topology() -> dict[str, int]:
                 cores.add((package, f.read().strip()))
     except (OSError, AttributeError):
         return {}
-    return {"usable_cpus": len(cpus), "physical_cores": len(cores)}
+    return {"physical_cores": len(cores)}
 
 
 def write_report(path: str, name: str, results: dict[str, Any]) -> dict[str, Any]:
