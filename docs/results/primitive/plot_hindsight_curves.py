@@ -1,6 +1,6 @@
 """Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
 push policy, with hindsight goals (items 13-18 of README.md) and without (the table's rows); and
-variant_curves.png: the variants of the low-push hindsight run on push_turn (items 20-24).
+variant_curves.png: the variants of the low-push hindsight run on push_turn (items 19-23, 27, 30).
 
     .venv/bin/python docs/results/primitive/plot_hindsight_curves.py
 
@@ -26,9 +26,11 @@ RUNS = {  # label -> history file, drawn in this order (same colour per task, da
     "full6d + hindsight goals": ("train_history_full6d_hindsight.json", "tab:green", "-"),
     "full6d + hindsight goals, 10 cm pushes": ("train_history_full6d_hindsight_short_push.json",
                                                "tab:olive", "-"),
+    "full6d + hindsight goals, 10 cm pushes, kept on the table": (
+        "train_history_full6d_hindsight_short_push_keep_on_table.json", "tab:olive", ":"),
 }
 
-VARIANTS = {  # item 15's run and what items 20-24 changed in it, each to 12,000 primitives
+VARIANTS = {  # item 15's run and what items 19-23, 27 and 30 changed in it, each to 12,000 primitives
     "low pushes (item 15)": ("train_history_push_turn_hindsight_low_push.json", "tab:red", "-"),
     "64 point locations": ("train_history_push_turn_hindsight_point64.json", "tab:blue", "-"),
     "cloud-point reward": ("train_history_push_turn_hindsight_cloud_reward.json", "tab:green",
@@ -38,6 +40,10 @@ VARIANTS = {  # item 15's run and what items 20-24 changed in it, each to 12,000
                                      "tab:brown", "-"),
     "no exit goals + short pushes, 15 primitives": (
         "train_history_push_turn_hindsight_short_push.json", "tab:purple", "-"),
+    "pushes kept on the table": ("train_history_push_turn_hindsight_keep_on_table.json",
+                                 "tab:olive", "-"),
+    "8-period pushes kept on the table": (
+        "train_history_push_turn_hindsight_slow_push_keep_on_table.json", "tab:cyan", "-"),
 }
 
 
