@@ -86,14 +86,13 @@ def collect_paces(job: Job, index: int, count: int, pin: bool, barrier, results)
 
         from corn_drake.config.diagram_files import load_teacher_config
         from corn_drake.rl.agent import TeacherAgent
-        from corn_drake.rl.core_pinning import pin_worker
+        from corn_drake.rl.core_pinning import take_worker_core
         from corn_drake.rl.pretrained_encoders import make_encoder
         from corn_drake.rl.run_progress import run_env_factory
         from corn_drake.rl.segments import SegmentCollector
         from corn_drake.rl.vec_env import EnvBatch
 
-        core = pin_worker(index if pin else None)
-        torch.set_num_threads(1)  # as a segment worker
+        core = take_worker_core(index if pin else None)  # as a segment worker takes it
         torch.manual_seed(job.seed)
         env_cfg = load_teacher_config(job.task)
         factory = run_env_factory(env_cfg, job.seed, count, job.envs)

@@ -1,4 +1,5 @@
-"""Pinning rollout workers to cores (`pin_workers`, `bench cores --pin`).
+"""How a rollout worker's process takes its core: pinned to one (`pin_workers`,
+`bench cores --pin`), and torch held to one thread.
 
 Unpinned, the kernel may run two busy workers on one core for a while and move a worker between
 cores (losing its caches); on a many-core machine every lock-step update waits for the slowest
@@ -41,4 +42,15 @@ def pin_worker(index: int | None) -> int | None:
         return None
     core = worker_core(index)
     pin_process(core)
+    return core
+
+
+def take_worker_core(index: int | None) -> int | None:
+    """A Ray rollout worker's first step (every kind: segments, primitives, lock-step envs):
+    pinned as worker `index` (None: unpinned), and one torch thread, so its inference does not
+    spread threads over the other workers' cores. The core, or None."""
+    import torch
+
+    core = pin_worker(index)
+    torch.set_num_threads(1)
     return core

@@ -43,13 +43,9 @@ class PrimitiveWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
                  seed: list[int], hindsight: HindsightRule | None = None,
                  pin_index: int | None = None):
-        import torch
+        from corn_drake.rl.core_pinning import take_worker_core
 
-        from corn_drake.rl.core_pinning import pin_worker
-
-        pin_worker(pin_index)  # None: unpinned
-        # One core per worker: its inference must not spread threads over the others' cores.
-        torch.set_num_threads(1)
+        take_worker_core(pin_index)
         self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent,
                                             hindsight=hindsight)
         self.rng = np.random.default_rng(seed)

@@ -22,9 +22,9 @@ from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
 class RolloutWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int,
                  pin_index: int | None = None):
-        from corn_drake.rl.core_pinning import pin_worker
+        from corn_drake.rl.core_pinning import take_worker_core
 
-        pin_worker(pin_index)  # None: unpinned
+        take_worker_core(pin_index)
         self.batch = EnvBatch(factory, num_envs, first_index)
 
     def reset(self):

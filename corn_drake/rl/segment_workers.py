@@ -35,13 +35,9 @@ MAX_REPLACEMENTS_PER_UPDATE = 3
 class SegmentWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
                  pin_index: int | None = None):
-        import torch
+        from corn_drake.rl.core_pinning import take_worker_core
 
-        from corn_drake.rl.core_pinning import pin_worker
-
-        pin_worker(pin_index)  # None: unpinned
-        # One core per worker: its inference must not spread threads over the others' cores.
-        torch.set_num_threads(1)
+        take_worker_core(pin_index)
         self.collector = SegmentCollector(EnvBatch(factory, num_envs, first_index), agent, "cpu")
 
     def collect(self, state: dict, version: int, noise: np.ndarray) -> Segment:
