@@ -205,9 +205,10 @@ def run(args) -> dict:
             "pace_slowest": [r["pace_slowest"] for r in runs],
             "runs": runs,
         }
+    cpus = usable_cpus()
     return {"procs": counts, "modes": modes, "policy": args.policy, "task": args.task,
             "envs_per_worker": args.envs_per_worker, "rollout_steps": args.rollout_steps,
             "segments": args.segments, "warmup_segments": args.warmup_segments,
-            "usable_cpus": usable_cpus(),
-            "warnings": [f"--procs {n}: more processes than the {usable_cpus()} usable cores"
-                         for n in counts if n > usable_cpus()]}
+            "usable_cpus": cpus,
+            "warnings": [f"--procs {n}: more processes than the {cpus} usable cores"
+                         for n in counts if n > cpus]}

@@ -15,22 +15,27 @@ from __future__ import annotations
 import os
 
 
+def usable_cores() -> set[int]:
+    """The cores this process may run on; a clear error where the OS cannot say (not Linux)."""
+    if not hasattr(os, "sched_setaffinity"):
+        raise RuntimeError("pinning workers to cores needs Linux (os.sched_setaffinity)")
+    return os.sched_getaffinity(0)
+
+
 def worker_core(index: int, cpus: list[int] | None = None) -> int:
     """The core worker `index` runs on: the (index + 1)-th of `cpus` (default: the cores this
     process may use), wrapping around; with one core, that core."""
     if index < 0:
         raise ValueError(f"worker index must be >= 0, got {index}")
-    cpus = sorted(os.sched_getaffinity(0) if cpus is None else cpus)
+    cpus = sorted(usable_cores() if cpus is None else cpus)
     if not cpus:
         raise ValueError("no cores to pin to")
-    return cpus[(index + 1) % len(cpus)] if len(cpus) > 1 else cpus[0]
+    return cpus[(index + 1) % len(cpus)]
 
 
 def pin_process(core: int) -> None:
     """Runs this process (every thread it starts from now on) on `core` alone."""
-    if not hasattr(os, "sched_setaffinity"):
-        raise RuntimeError("pinning workers to cores needs Linux (os.sched_setaffinity)")
-    allowed = os.sched_getaffinity(0)
+    allowed = usable_cores()
     if core not in allowed:
         raise ValueError(f"core {core} is not one this process may use ({sorted(allowed)})")
     os.sched_setaffinity(0, {core})

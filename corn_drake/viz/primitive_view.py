@@ -189,8 +189,7 @@ def add_primitive_view(builder, handles, meshcat: Meshcat, clock: PolicyClock,
     policy = handles.policy
     num_locations = None if policy is None else policy.GetOutputPort("scores").size()
     view = builder.AddNamedSystem("primitive_view", PrimitiveView(
-        meshcat, clock, num_points, num_locations,
-        path))
+        meshcat, clock, num_points, num_locations, path))
     builder.Connect(handles.executor.GetOutputPort("status"), view.GetInputPort("executor_status"))
     builder.Connect(cloud, view.GetInputPort("cloud"))
     if policy is None:
