@@ -33,6 +33,10 @@ def test_a_report_gives_each_episodes_failure_and_the_counts(tmp_path):
                                         for name in FAILURES}
     motion = report["episodes"][0]["motion"]
     assert motion["moved"] < 0.01 and motion["start_position_error"] > 0.05
+    # The untouched object ends still; no success, so none ending still.
+    speed = report["episodes"][0]["end_speed"]
+    assert 0 <= speed["linear"] < 0.02 and 0 <= speed["angular"] < 0.2
+    assert report["successes_ending_still"] == 0
 
 
 def test_a_report_names_its_library_and_the_checkpoint_it_used(tmp_path, capsys):

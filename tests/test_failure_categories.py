@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from corn_drake.config.task import TaskConfig
-from corn_drake.evaluation.failures import (FAILURES, failure_category, failure_counts,
-                                            motion_summary)
+from corn_drake.evaluation.failures import (FAILURES, failure_category, failure_counts, is_still,
+                                            motion_summary, successes_ending_still)
 
 UPRIGHT = [1.0, 0.0, 0.0, 0.0]
 # 90 degrees about x: the object lies on its side.
@@ -70,3 +70,14 @@ def test_counts_list_every_category():
                              {"failure": "near_miss"}])
     assert list(counts) == list(FAILURES)
     assert counts["near_miss"] == 2 and counts["success"] == 1 and sum(counts.values()) == 3
+
+
+def test_successes_ending_still_count_only_successes_at_rest():
+    assert is_still({"linear": 0.019, "angular": 0.19})
+    assert not is_still({"linear": 0.021, "angular": 0.0})
+    assert not is_still({"linear": 0.0, "angular": 4.2})  # spinning through the goal
+    rows = [{"success": True, "end_speed": {"linear": 0.001, "angular": 0.01}},
+            {"success": True, "end_speed": {"linear": 0.3, "angular": 4.0}},
+            {"success": False, "end_speed": {"linear": 0.0, "angular": 0.0}},
+            {"success": True}]  # a report row from before end_speed was kept
+    assert successes_ending_still(rows) == 1

@@ -197,6 +197,12 @@ def test_hindsight_goals_refuse_the_tipping_penalty():
         _cfg(primitive=PrimitiveConfig(tip_penalty=1.0)).check()
 
 
+def test_hindsight_goals_refuse_success_at_rest():
+    with pytest.raises(InputError, match="hindsight_goals.*success_at_rest"):
+        _cfg(primitive=PrimitiveConfig(success_at_rest=True)).check()
+    _cfg(primitive=PrimitiveConfig(success_at_rest=True), hindsight_goals=0).check()
+
+
 def _episode_leaving_the_workspace(exit_goals: bool, exit_penalty: float = 0.0) -> dict:
     """The copies of a hand-made 3-primitive episode whose last push threw the object 0.6 m
     away (the env ended it there without success), under a rule with `exit_goals`."""

@@ -20,7 +20,8 @@ from typing import Callable
 import numpy as np
 
 from corn_drake.errors import InputError
-from corn_drake.evaluation.failures import failure_category, failure_counts, motion_summary
+from corn_drake.evaluation.failures import (failure_category, failure_counts, motion_summary,
+                                            successes_ending_still)
 
 
 @dataclasses.dataclass
@@ -36,6 +37,7 @@ class EpisodeResult:
     start_pose: np.ndarray | None = None
     end_pose: np.ndarray | None = None
     goal_pose: np.ndarray | None = None
+    end_speed: dict | None = None  # the object's speed at the end (DiagramEnv.object_speed)
 
     @property
     def success(self) -> bool:
@@ -81,7 +83,8 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
         recording = save_recording(env.meshcat, record_path)
     return EpisodeResult(steps=steps, total_reward=total, status=status, sim_error=error,
                          recording=recording, tracking=tracking, start_pose=start_pose,
-                         end_pose=env.object_pose(), goal_pose=np.asarray(env.episode.goal_pose))
+                         end_pose=env.object_pose(), goal_pose=np.asarray(env.episode.goal_pose),
+                         end_speed=env.object_speed())
 
 
 def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int | None = None,
@@ -209,6 +212,7 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
                          "out_of_workspace": bool(result.status.get("out_of_workspace", 0) > 0),
                          "motion": motion_summary(result.start_pose, result.end_pose,
                                                   result.goal_pose),
+                         "end_speed": result.end_speed,
                          "recording": (None if result.recording is None
                                        else str(result.recording))})
             rows[-1]["failure"] = failure_category(rows[-1], env.teacher_cfg.task)
@@ -233,6 +237,7 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
               "per_object": rates,
               "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
               "failure_counts": failure_counts(rows),
+              "successes_ending_still": successes_ending_still(rows),
               "complete": interrupted is None, "episodes_requested": episodes,
               "episodes": rows}
     if isinstance(env, StudentEnv):

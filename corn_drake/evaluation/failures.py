@@ -15,6 +15,11 @@ Rules, first match wins (the task's tolerances: success_position, success_orient
                         checks it): close, but not close enough
   moved_away_from_goal  the object ended farther from the goal (xy) than it started
   short_of_goal         moved toward the goal but stopped outside twice the tolerance
+
+A success is the task's (the paper's rule: within tolerance at any policy period, no stillness
+check), so it can be a pose the object passes through mid-push. Each row also keeps the object's
+speed at the end (`end_speed`) and a report counts the successes that ended with the object
+still (`successes_ending_still`: under 2 cm/s and 0.2 rad/s).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from collections import Counter
 
 import numpy as np
 
+from corn_drake.config.primitive import REST_ANGULAR_SPEED, REST_LINEAR_SPEED
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle, up_angle
 
@@ -76,6 +82,17 @@ def failure_category(row: dict, task) -> str:
     if motion["end_position_error"] > motion["start_position_error"]:
         return "moved_away_from_goal"
     return "short_of_goal"
+
+
+def is_still(speed: dict) -> bool:
+    """Whether an object speed {"linear" (m/s), "angular" (rad/s)} is at rest."""
+    return speed["linear"] < REST_LINEAR_SPEED and speed["angular"] < REST_ANGULAR_SPEED
+
+
+def successes_ending_still(rows: list[dict]) -> int:
+    """How many successful report rows ended with the object still (rows with end_speed)."""
+    return sum(1 for row in rows if row.get("success") and row.get("end_speed") is not None
+               and is_still(row["end_speed"]))
 
 
 def failure_counts(rows: list[dict]) -> dict[str, int]:

@@ -3,7 +3,9 @@
 DiagramEnv holds what every rollout diagram shares (the teacher's systems inside it): one
 Simulator built once and reused; reset() draws an Episode (corn_drake/tasks/episode.py) and
 writes it into the context (TeacherDiagram.write_episode); step() fixes the action input port,
-advances one policy period and reads reward, status and termination. What the policy sees is
+advances one policy period and reads reward, status and termination; snapshot() and restore()
+save and bring back the whole state (the root context and the env's counters), so several
+actions can be tried from one state (rl/lookahead.py). What the policy sees is
 the subclass's: TeacherEnv returns the teacher's privileged observation (TeacherObservationReader);
 corn_drake/rl/student_env.py's StudentEnv returns the student's and the teacher's of the same
 state. Whole episodes with a policy, recordings and reports are corn_drake/evaluation/episodes.py's job.
@@ -11,20 +13,31 @@ state. Whole episodes with a policy, recordings and reports are corn_drake/evalu
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import InitializeParams, Simulator
 
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, OBS_KEYS, check_action
+from corn_drake.errors import InputError
 from corn_drake.builders.teacher import TeacherDiagram, build_teacher_diagram
 from corn_drake.config.diagram_files import load_teacher_config
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.reward import STATUS_FIELDS
 from corn_drake.tasks.episode import Episode, sample_episode
 from corn_drake.timing import clock_of
+
+
+@dataclass(frozen=True)
+class EnvSnapshot:
+    """DiagramEnv.snapshot()'s value: a copy of the root context and the env's counters."""
+    owner: int  # id() of the env it came from: a context only fits its own diagram
+    context: object
+    counters: dict
+    episode: Episode
 
 
 def zeros_like_space(space: gym.spaces.Space):
@@ -94,10 +107,47 @@ class DiagramEnv(gym.Env):
         X = self.scene.plant.EvalBodyPoseInWorld(self._plant_context, self.scene.object_body)
         return np.concatenate([X.translation(), X.rotation().ToQuaternion().wxyz()])
 
+    def object_speed(self) -> dict[str, float]:
+        """The object's speed now: {"linear" (m/s), "angular" (rad/s)}."""
+        V = self.scene.plant.EvalBodySpatialVelocityInWorld(self._plant_context,
+                                                            self.scene.object_body)
+        return {"linear": float(np.linalg.norm(V.translational())),
+                "angular": float(np.linalg.norm(V.rotational()))}
+
     @property
     def policy_in_diagram(self) -> bool:
         """Whether a PolicySystem inside the diagram acts (then step() takes no action)."""
         return self._action_port is None
+
+    def snapshot(self) -> "EnvSnapshot":
+        """The env's state now (the diagram's whole context: time, plant, controller, executor;
+        and the env's own counters), for restore(): a one-step lookahead tries several actions
+        from one state (rl/lookahead.py). Every system of the project keeps its state
+        in the context, so nothing else needs saving."""
+        if self.episode is None:
+            raise InputError("snapshot: the env has no episode yet; call reset() first")
+        return EnvSnapshot(owner=id(self), context=self.context.Clone(),
+                           counters=self._counters(), episode=self.episode)
+
+    def restore(self, snapshot: "EnvSnapshot") -> None:
+        """Puts the env back into `snapshot`'s state (one taken from this env by snapshot())."""
+        if not isinstance(snapshot, EnvSnapshot) or snapshot.owner != id(self):
+            raise InputError("restore: the snapshot was not taken from this env "
+                             f"(got {type(snapshot).__name__})")
+        self.context.SetTimeStateAndParametersFrom(snapshot.context)
+        # The simulator's pending events belong to the time it stopped at: recompute them from
+        # the restored time, without the initialization events (they would reset the state).
+        self.simulator.Initialize(InitializeParams(suppress_initialization_events=True))
+        self.episode = snapshot.episode
+        self._set_counters(snapshot.counters)
+
+    def _counters(self) -> dict:
+        """The env's own state outside the context (subclasses add theirs)."""
+        return {"_steps": self._steps}
+
+    def _set_counters(self, counters: dict) -> None:
+        for name, value in counters.items():
+            setattr(self, name, value)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

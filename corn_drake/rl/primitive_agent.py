@@ -94,7 +94,8 @@ class PrimitiveAgent(nn.Module):
 
     def choose(self, obs: dict[str, np.ndarray]) -> dict:
         """The greedy choice for one observation: {"point" (cloud index), "motion" (3,),
-        "location" (index among the candidates), "scores" (L,), "candidates" (L,)}."""
+        "location" (index among the candidates), "scores" (L,), "usable" (L,), "candidates"
+        (L,), "motions" (L, 3: the actor's motion at every location)}."""
         single, _ = obs_to_torch(obs)
         if not single:
             raise ValueError("PrimitiveAgent.choose takes one observation (cloud (N, 3))")
@@ -109,7 +110,8 @@ class PrimitiveAgent(nn.Module):
                 "motion": motions[0, location].numpy().astype(np.float64),
                 "location": location, "scores": shown,
                 "usable": features["mask"][0].numpy() > 0.5,
-                "candidates": candidates[0].numpy()}
+                "candidates": candidates[0].numpy(),
+                "motions": motions[0].numpy().astype(np.float64)}
 
     def location_count(self, num_points: int) -> int:
         """How many candidate locations the agent scores per observation of `num_points`."""

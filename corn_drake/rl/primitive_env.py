@@ -17,7 +17,9 @@ success_reward on success; info["task_reward"] keeps the teacher's per-period re
 Episode end: success, out of workspace, or (with PrimitiveConfig.tip_penalty on a task whose goal
 keeps the face) the object tipped onto another face (terminated, info["tipped"]); max_primitives
 primitives (HACMan's 10) or the task's episode_steps of policy periods (truncated), whichever
-comes first.
+comes first. With PrimitiveConfig.success_at_rest a success mid-primitive does not end the step:
+the primitive runs to its end, and the success stands only if the object is then still at the
+goal (the in-diagram path judges the same way, at the period the executor is idle).
 
 Observation: the teacher's privileged keys (cloud, hand_state, ..., object_keypoints) plus
 `normals` (N, 3: the cloud's outward normals, world frame), `object_position` (3) and
@@ -130,6 +132,9 @@ class PrimitiveEnv(DiagramEnv):
         if self._agent_inside:
             obs, reward, terminated, truncated, info = super().step(action)
             status = self.executor_status()
+            if self.primitive_cfg.success_at_rest and "sim_error" not in info:
+                terminated, truncated = self._judge_at_rest(
+                    info, status[STATUS_LAYOUT["phase"]] == IDLE)
             if status[STATUS_LAYOUT["phase"]] == IDLE and not terminated and \
                     round(status[STATUS_LAYOUT["count"]]) >= self.primitive_cfg.max_primitives:
                 truncated = True  # the primitive budget is spent, as in training
@@ -148,7 +153,9 @@ class PrimitiveEnv(DiagramEnv):
             total += reward
             ticks += 1
             if terminated or truncated:
-                break
+                if not (terminated and self._success_waits(info)):
+                    break
+                terminated = False  # at rest only: judged when the primitive has ended
             status = self.executor_status()
             if status[STATUS_LAYOUT["phase"]] == IDLE and \
                     round(status[STATUS_LAYOUT["count"]]) >= sequence:
@@ -157,6 +164,9 @@ class PrimitiveEnv(DiagramEnv):
         if "sim_error" in info:
             return zeros_like_space(self.observation_space), total, True, False, info
         status = self.executor_status()
+        if self.primitive_cfg.success_at_rest:
+            terminated, truncated = self._judge_at_rest(
+                info, status[STATUS_LAYOUT["phase"]] == IDLE)
         truncated = truncated or (not terminated and
                                   self.primitives >= self.primitive_cfg.max_primitives)
         info.update({"ticks": ticks, "reached": bool(status[STATUS_LAYOUT["reached"]] > 0),
@@ -173,6 +183,33 @@ class PrimitiveEnv(DiagramEnv):
             terminated, truncated = True, False
             info["tipped"] = True
         return obs, reward, terminated, truncated, info
+
+    def _success_waits(self, info: dict) -> bool:
+        """Whether a success mid-primitive waits for the primitive's end (success_at_rest), the
+        episode's periods not yet spent."""
+        status = info["status"]
+        return self.primitive_cfg.success_at_rest and status["success"] > 0 and \
+            status["out_of_workspace"] <= 0 and self._steps < self.cfg.task.episode_steps
+
+    def object_still(self) -> bool:
+        """The object moves slower than PrimitiveConfig's rest speeds (linear and angular)."""
+        speed = self.object_speed()
+        return speed["linear"] < self.primitive_cfg.rest_linear_speed and \
+            speed["angular"] < self.primitive_cfg.rest_angular_speed
+
+    def _judge_at_rest(self, info: dict, idle: bool) -> tuple[bool, bool]:
+        """(terminated, truncated) under success_at_rest: the task's success stands only with
+        the executor idle and the object still; otherwise info's status says no success and the
+        episode goes on (unless it left the workspace or its periods are spent)."""
+        status = info["status"]
+        if status["success"] > 0 and not (idle and self.object_still()):
+            status["success"] = 0.0
+        terminated = status["success"] > 0 or status["out_of_workspace"] > 0
+        truncated = not terminated and self._steps >= self.cfg.task.episode_steps
+        return terminated, truncated
+
+    def _counters(self) -> dict:
+        return {**super()._counters(), "primitives": self.primitives}
 
     def _tipped(self) -> bool:
         """Whether the tipping rule (PrimitiveConfig.tip_penalty) ends this episode: it is on,

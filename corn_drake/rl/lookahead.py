@@ -1,0 +1,77 @@
+"""One-step lookahead over contact primitives: simulate every candidate from the env's current
+state, keep the one whose primitive earned the most reward.
+
+A diagnostic, not a policy: it uses the simulator (the exact object, its mass and friction) as
+a model, which no deployed policy has. What it measures is how far the primitive set itself
+can take a task when each primitive is chosen as well as one primitive's outcome allows: if
+that is far above the learned policy, the learner is what holds the task back; if it is not,
+the primitives are (docs/results/primitive/README.md, item 33;
+docs/results/primitive/lookahead_oracle.py runs it on the evaluation episodes). It is also the
+teacher rl/lookahead_distill.py fits the policy to (item 34).
+
+The candidates are the learned policy's own: for every location it may use, the motion its
+actor gives there, plus `random_motions` motions drawn uniformly from [-1, 1]^3 per location.
+So the policy's greedy choice is always among them, and the lookahead's reward per primitive is
+never below the greedy one's from the same state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from corn_drake.errors import InputError
+
+
+@dataclass
+class LookaheadStep:
+    """The chosen candidate's env step, and what was tried."""
+    point: int
+    motion: np.ndarray
+    rewards: np.ndarray  # every candidate's reward, in candidate order
+    chosen: int  # index of the chosen candidate
+    greedy_reward: float  # the policy's own greedy choice (candidate 0)
+    step: tuple  # (obs, reward, terminated, truncated, info) of the chosen primitive
+    start: object  # the env's snapshot before any candidate (to take another one instead)
+
+
+def candidate_primitives(choice: dict, random_motions: int, rng: np.random.Generator
+                         ) -> list[tuple[int, int, np.ndarray]]:
+    """[(location, cloud point, motion)] from PrimitiveAgent.choose's `choice`: the greedy
+    choice first, then the actor's motion at every other usable location, then
+    `random_motions` uniform motions at every usable location."""
+    if random_motions < 0:
+        raise InputError(f"lookahead: random_motions must be >= 0, got {random_motions}")
+    usable = np.flatnonzero(choice["usable"])
+    greedy, points, motions = int(choice["location"]), choice["candidates"], choice["motions"]
+    out = [(greedy, int(choice["point"]), np.asarray(choice["motion"], float))]
+    for location in usable:
+        if location != greedy:
+            out.append((int(location), int(points[location]), np.asarray(motions[location], float)))
+    for location in usable:
+        for _ in range(random_motions):
+            out.append((int(location), int(points[location]), rng.uniform(-1.0, 1.0, 3)))
+    return out
+
+
+def lookahead_step(env, candidates: list[tuple[int, int, np.ndarray]]) -> LookaheadStep:
+    """Tries every candidate primitive from `env`'s state (a PrimitiveEnv with no policy inside)
+    and leaves the env in the state after the best one (the most reward; the first on a tie,
+    so the greedy choice wins ties)."""
+    if not candidates:
+        raise InputError("lookahead: no candidate primitives (no usable location)")
+    start = env.snapshot()
+    rewards, best, best_after, best_step = [], -np.inf, None, None
+    for _, point, motion in candidates:
+        env.restore(start)
+        step = env.step({"point": point, "motion": motion})
+        reward = float(step[1])
+        rewards.append(reward)
+        if reward > best:
+            best, best_after, best_step = reward, env.snapshot(), step
+    env.restore(best_after)
+    chosen = int(np.argmax(rewards))
+    _, point, motion = candidates[chosen]
+    return LookaheadStep(point=point, motion=motion, rewards=np.asarray(rewards), chosen=chosen,
+                         greedy_reward=rewards[0], step=best_step, start=start)

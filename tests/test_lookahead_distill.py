@@ -1,0 +1,97 @@
+"""Distilling the one-step lookahead: the collected states hold every candidate's reward from the
+same state, an episode that follows the policy is the policy's own episode, the critic fitted to
+the rewards predicts them better than before, and the actor's fit raises the critic's value."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.primitive import PrimitiveConfig
+from corn_drake.errors import InputError
+from corn_drake.rl.lookahead_distill import (choice_quality, collect_episode, critic_error,
+                                             fit_actor, fit_critic, stack_states)
+from corn_drake.rl.primitive_env import PrimitiveEnv
+
+
+def _agent():
+    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.rl.primitive_agent import PrimitiveAgent
+
+    torch.manual_seed(0)
+    return PrimitiveAgent(make_policy_encoder("corn"), "patch").eval()
+
+
+def _env(max_primitives: int = 2) -> PrimitiveEnv:
+    return PrimitiveEnv(load_primitive_env_config("push"),
+                        PrimitiveConfig(max_primitives=max_primitives))
+
+
+@pytest.fixture(scope="module")
+def collected():
+    agent, env = _agent(), _env()
+    states, outcome = collect_episode(env, agent, 3, 1, 0.0, np.random.default_rng(0))
+    return agent, states, outcome
+
+
+def test_each_state_holds_every_candidates_reward(collected):
+    agent, states, outcome = collected
+    assert outcome["primitives"] == len(states) == 2
+    for state in states:
+        locations = state["features"]["tokens"].shape[0]
+        usable = int(state["features"]["mask"].sum())
+        # The greedy one, the actor at the other usable locations, one random motion at each.
+        assert len(state["reward"]) == len(state["location"]) == len(state["motion"]) \
+            == 2 * usable
+        assert set(state["location"]) <= set(range(locations))
+        assert np.isfinite(state["reward"]).all() and np.abs(state["motion"]).max() <= 1
+    assert np.ptp(states[0]["reward"]) > 0, "every candidate earned the same: nothing to learn"
+
+
+def test_following_the_policy_plays_the_policys_own_episode():
+    agent, env = _agent(), _env()
+    collect_episode(env, agent, 3, 1, 1.0, np.random.default_rng(0))
+    followed = env.object_pose()
+    own = _env()
+    obs, _ = own.reset(seed=3)
+    for _ in range(2):
+        choice = agent.choose(obs)
+        obs, _, terminated, truncated, _ = own.step({"point": choice["point"],
+                                                     "motion": choice["motion"]})
+        if terminated or truncated:
+            break
+    np.testing.assert_array_equal(followed, own.object_pose())
+
+
+def test_the_fitted_critic_predicts_the_rewards_and_the_actor_follows_it(collected):
+    agent, states, _ = collected
+    data = stack_states(states)
+    assert data["features_tokens"].shape[0] == 2 and data["state"].max() == 1
+    before = critic_error(agent, data)
+    losses = fit_critic(agent, data, epochs=60, batch_size=16, validation=data)
+    after = critic_error(agent, data)
+    assert after < 0.25 * before and losses["train"][-1] < losses["train"][0]
+    assert losses["validation"][-1] == pytest.approx(after)
+    actor_losses = fit_actor(agent, data, epochs=30, batch_size=2)
+    assert actor_losses[-1] < actor_losses[0]  # -Q1 fell: the actor moved toward the critic's best
+    assert all(p.requires_grad for p in agent.critic.parameters())
+
+
+def test_the_rank_fit_orders_each_states_candidates(collected):
+    agent, states, _ = collected
+    data = stack_states(states)
+    losses = fit_critic(agent, data, epochs=60, batch_size=64, loss="rank")
+    assert losses["train"][-1] < 0.8 * losses["train"][0]
+    assert choice_quality(agent, data)["chosen"] == pytest.approx(
+        choice_quality(agent, data)["best"], abs=1e-6)  # on its own data: the best candidate
+
+
+def test_bad_input_is_refused_by_name():
+    with pytest.raises(InputError, match="no lookahead states"):
+        stack_states([])
+    with pytest.raises(InputError, match="loss"):
+        fit_critic(_agent(), {"state": np.zeros(1, np.int64)}, 1, loss="hinge")
+    with pytest.raises(InputError, match="follow_policy"):
+        collect_episode(_env(), _agent(), 3, 1, 1.5, np.random.default_rng(0))
