@@ -77,14 +77,21 @@ def _features(data: dict, index: torch.Tensor) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(data[f"features_{k}"])[index] for k in FEATURE_KEYS}
 
 
+def _q_at_rows(agent, data: dict, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(q1, q2) of the critic for data rows `rows`: each row's motion at its own location."""
+    features = _features(data, torch.as_tensor(data["state"])[rows])
+    # Every location gets the row's motion; only the row's own location is read.
+    motions = torch.as_tensor(data["motion"])[rows][:, None, :].expand(
+        -1, features["tokens"].shape[1], -1)
+    q1, q2 = agent.critic(features, motions)
+    at = torch.as_tensor(data["location"])[rows][:, None]
+    return q1.gather(1, at)[:, 0], q2.gather(1, at)[:, 0]
+
+
 def critic_error(agent, data: dict[str, np.ndarray]) -> float:
     """Mean squared error of the agent's Q1 against the rows' rewards."""
     with torch.no_grad():
-        features = _features(data, torch.as_tensor(data["state"]))
-        motions = torch.as_tensor(data["motion"])[:, None, :].expand(
-            -1, features["tokens"].shape[1], -1)
-        q1, _ = agent.critic(features, motions)
-        q1 = q1.gather(1, torch.as_tensor(data["location"])[:, None])[:, 0]
+        q1, _ = _q_at_rows(agent, data, torch.arange(len(data["reward"])))
     return float(((q1 - torch.as_tensor(data["reward"])) ** 2).mean())
 
 
@@ -94,11 +101,7 @@ def choice_quality(agent, data: dict[str, np.ndarray]) -> dict[str, float]:
     lookahead's; `first`, candidate 0 (the collecting policy's own choice); `mean`, a random
     candidate's expectation."""
     with torch.no_grad():
-        features = _features(data, torch.as_tensor(data["state"]))
-        motions = torch.as_tensor(data["motion"])[:, None, :].expand(
-            -1, features["tokens"].shape[1], -1)
-        q1 = agent.critic(features, motions)[0].gather(
-            1, torch.as_tensor(data["location"])[:, None])[:, 0].numpy()
+        q1 = _q_at_rows(agent, data, torch.arange(len(data["reward"])))[0].numpy()
     figures = {"chosen": [], "best": [], "first": [], "mean": []}
     state, reward = data["state"], data["reward"]
     for i in np.unique(state):
@@ -136,8 +139,7 @@ def fit_critic(agent, data: dict[str, np.ndarray], epochs: int, batch_size: int 
     torch.manual_seed(seed)
     rows = len(data["reward"])
     optimiser = torch.optim.Adam(agent.critic.parameters(), lr=lr)
-    state, location = torch.as_tensor(data["state"]), torch.as_tensor(data["location"])
-    motion, reward = torch.as_tensor(data["motion"]), torch.as_tensor(data["reward"])
+    state, reward = torch.as_tensor(data["state"]), torch.as_tensor(data["reward"])
     losses, held_out = [], []
     agent.critic.train()
     states = int(state.max()) + 1
@@ -149,13 +151,7 @@ def fit_critic(agent, data: dict[str, np.ndarray], epochs: int, batch_size: int 
         total = 0.0
         for start in range(0, rows, batch_size):
             batch = order[start:start + batch_size]
-            features = _features(data, state[batch])
-            locations = features["tokens"].shape[1]
-            # Every location gets the row's motion; only the row's own location is scored.
-            motions = motion[batch][:, None, :].expand(-1, locations, -1)
-            q1, q2 = agent.critic(features, motions)
-            at = location[batch][:, None]
-            q1, q2 = q1.gather(1, at)[:, 0], q2.gather(1, at)[:, 0]
+            q1, q2 = _q_at_rows(agent, data, batch)
             if loss == "rank":
                 value = _rank_loss(q1, reward[batch], state[batch], temperature) + \
                     _rank_loss(q2, reward[batch], state[batch], temperature)
