@@ -62,16 +62,14 @@ def lookahead_step(env, candidates: list[tuple[int, int, np.ndarray]]) -> Lookah
     if not candidates:
         raise InputError("lookahead: no candidate primitives (no usable location)")
     start = env.snapshot()
-    rewards, best, best_after, best_step = [], -np.inf, None, None
-    for _, point, motion in candidates:
+    rewards, chosen, best_after, best_step = [], None, None, None
+    for index, (_, point, motion) in enumerate(candidates):
         env.restore(start)
         step = env.step({"point": point, "motion": motion})
-        reward = float(step[1])
-        rewards.append(reward)
-        if reward > best:
-            best, best_after, best_step = reward, env.snapshot(), step
+        rewards.append(float(step[1]))
+        if chosen is None or rewards[-1] > rewards[chosen]:
+            chosen, best_after, best_step = index, env.snapshot(), step
     env.restore(best_after)
-    chosen = int(np.argmax(rewards))
     _, point, motion = candidates[chosen]
     return LookaheadStep(point=point, motion=motion, rewards=np.asarray(rewards), chosen=chosen,
                          greedy_reward=rewards[0], step=best_step, start=start)
