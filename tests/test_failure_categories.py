@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
+from corn_drake.config.primitive import at_rest
 from corn_drake.config.task import TaskConfig
-from corn_drake.evaluation.failures import (FAILURES, failure_category, failure_counts, is_still,
+from corn_drake.evaluation.failures import (FAILURES, failure_category, failure_counts,
                                             motion_summary, successes_ending_still)
 
 UPRIGHT = [1.0, 0.0, 0.0, 0.0]
@@ -73,9 +74,10 @@ def test_counts_list_every_category():
 
 
 def test_successes_ending_still_count_only_successes_at_rest():
-    assert is_still({"linear": 0.019, "angular": 0.19})
-    assert not is_still({"linear": 0.021, "angular": 0.0})
-    assert not is_still({"linear": 0.0, "angular": 4.2})  # spinning through the goal
+    assert at_rest({"linear": 0.019, "angular": 0.19})
+    assert not at_rest({"linear": 0.021, "angular": 0.0})
+    assert not at_rest({"linear": 0.0, "angular": 4.2})  # spinning through the goal
+    assert at_rest({"linear": 0.03, "angular": 0.3}, linear=0.05, angular=0.5)  # a config's speeds
     rows = [{"success": True, "end_speed": {"linear": 0.001, "angular": 0.01}},
             {"success": True, "end_speed": {"linear": 0.3, "angular": 4.0}},
             {"success": False, "end_speed": {"linear": 0.0, "angular": 0.0}},

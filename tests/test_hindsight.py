@@ -15,7 +15,7 @@ from corn_drake.errors import InputError
 from corn_drake.nn.primitive_features import location_features, with_goal
 from corn_drake.package_data import data_dir
 from corn_drake.rl.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
-                                     relative_goal, reward)
+                                     relative_goal, reward, succeeded)
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.rl.primitive_env import PrimitiveEnv
 from corn_drake.transforms import from_pose9, pose9
@@ -192,15 +192,76 @@ def test_a_hindsight_run_stores_the_copies_and_counts_only_its_primitives(tmp_pa
     assert trainer.learner.updates == 4
 
 
+def test_an_at_rest_runs_collector_relabels_with_the_final_speeds(tmp_path):
+    """The collector hands the ended episodes' final speeds to the relabelling: a run with
+    success_at_rest and hindsight goals collects, and the copies of each episode's last push
+    (whose only goal is the pose it led to) are one copy three times: all of them succeed or
+    none, as that push's one final speed decides (a missing speed would be refused)."""
+    from corn_drake.rl.primitive_collection import Exploration
+    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+
+    cfg = _cfg(primitive=PrimitiveConfig(max_primitives=2, success_at_rest=True))
+    trainer = PrimitiveTrainer(cfg, tmp_path, load_encoder("corn", ENCODER))
+    assert trainer.collector.hindsight.rule.at_rest
+    explore = Exploration(random=True, temperature=0.1, motion_noise=0.3)
+    trainer.collector.collect(1, explore, trainer.np_rng)
+    copies = trainer.collector.collect(1, explore, trainer.np_rng).relabeled
+    assert len(copies.rewards) == 2 * 2 * 3
+    for env in range(2):
+        last = slice(6 * env + 3, 6 * env + 6)
+        done = copies.terminated[last]
+        assert done.all() or not done.any()
+        np.testing.assert_allclose(copies.rewards[last], copies.rewards[last][0], atol=1e-6)
+
+
 def test_hindsight_goals_refuse_the_tipping_penalty():
     with pytest.raises(InputError, match="hindsight_goals.*tip_penalty"):
         _cfg(primitive=PrimitiveConfig(tip_penalty=1.0)).check()
 
 
-def test_hindsight_goals_refuse_success_at_rest():
-    with pytest.raises(InputError, match="hindsight_goals.*success_at_rest"):
-        _cfg(primitive=PrimitiveConfig(success_at_rest=True)).check()
-    _cfg(primitive=PrimitiveConfig(success_at_rest=True), hindsight_goals=0).check()
+def test_at_rest_a_relabelled_success_needs_the_object_still():
+    """With success_at_rest the run's rule asks the object's speed at the primitive's end, as
+    the env does: the same pose reached while sliding is no success, reached still it is; a
+    state whose observation had no speed is refused rather than guessed."""
+    _cfg(primitive=PrimitiveConfig(success_at_rest=True)).check()  # no longer refused
+    task = _cfg().env.task
+    rule = HindsightRule.for_run(4, PrimitiveConfig(success_at_rest=True), task)
+    pose_rule = HindsightRule.for_run(4, PrimitiveConfig(), task)
+    assert rule.at_rest and not pose_rule.at_rest
+    corners = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.03, 0.03)
+                        for z in (0.0, 0.04)])
+
+    def state(x: float, speed) -> Achieved:
+        return Achieved(np.array([x, 0.0, 0.42]), np.eye(3), corners + [x, 0.0, 0.0],
+                        None if speed is None else np.array(speed))
+
+    goal = state(0.10, (0.0, 0.0))
+    sliding, still = state(0.10, (0.30, 0.0)), state(0.10, (0.001, 0.01))
+    spinning = state(0.10, (0.0, 3.0))
+    assert succeeded(pose_rule, sliding, goal) and succeeded(rule, still, goal)
+    assert not succeeded(rule, sliding, goal) and not succeeded(rule, spinning, goal)
+    before = state(0.0, (0.0, 0.0))
+    assert reward(rule, before, still, goal) - reward(rule, before, sliding, goal) == \
+        pytest.approx(task.success_reward)
+    with pytest.raises(ValueError, match="object_speed"):
+        succeeded(rule, state(0.10, None), goal)
+    assert not succeeded(rule, state(0.30, None), goal)  # out of tolerance: no speed needed
+
+
+def test_the_env_observes_the_speed_hindsight_judges_rest_by(tmp_path):
+    """object_speed in the primitive env's observation is the env's own object_speed(), and
+    achieved_states carries it."""
+    env = PrimitiveEnv(load_primitive_env_config("push"), PrimitiveConfig(max_primitives=1))
+    obs, _ = env.reset(seed=3)
+    index = int(np.argmax(np.abs(obs["normals"][:, 0]) - np.abs(obs["normals"][:, 2])))
+    obs, *_ = env.step({"point": index, "motion": -obs["normals"][index]})
+    speed = env.object_speed()
+    np.testing.assert_allclose(obs["object_speed"], [speed["linear"], speed["angular"]],
+                               rtol=1e-6)
+    assert env.observation_space["object_speed"].contains(obs["object_speed"])
+    state = achieved_states({k: obs[k][None] for k in ("object_position", "goal",
+                                                       "object_speed", "object_keypoints")})[0]
+    np.testing.assert_allclose(state.speed, obs["object_speed"])
 
 
 def _episode_leaving_the_workspace(exit_goals: bool, exit_penalty: float = 0.0) -> dict:

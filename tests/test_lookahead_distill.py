@@ -50,6 +50,37 @@ def test_each_state_holds_every_candidates_reward(collected):
     assert np.ptp(states[0]["reward"]) > 0, "every candidate earned the same: nothing to learn"
 
 
+def test_each_candidates_outcome_gives_back_its_reward(collected):
+    """The stored outcome (the object's pose before and after each candidate, its goal and box
+    keypoints) recomputes each candidate's reward independently of the env: 10 x how much the
+    candidate closed the mean keypoint distance to the goal (heights of the origin dropped),
+    plus the task's success reward where the candidate succeeded. A model of the primitives'
+    outcomes can be fitted to these and scored by the same rule."""
+    from corn_drake.transforms import quat_wxyz_to_matrix
+
+    _, states, _ = collected
+    data = stack_states(states)
+
+    def keypoints(corners, pose):
+        return corners @ quat_wxyz_to_matrix(pose[3:]).T + pose[:3] * np.array([1.0, 1.0, 0.0])
+
+    def distance(corners, pose, goal):
+        return np.linalg.norm(keypoints(corners, pose) - keypoints(corners, goal), axis=1).mean()
+
+    moved, success_reward = 0, load_primitive_env_config("push").task.success_reward
+    for row, state in enumerate(data["state"]):
+        corners, before = data["outcome_corners"][state], data["outcome_pose"][state]
+        goal, after = data["outcome_goal"][state], data["pose_after"][row]
+        reward = PrimitiveConfig().progress_reward * (distance(corners, before, goal)
+                                                      - distance(corners, after, goal))
+        reward += success_reward * float(data["success_after"][row])
+        assert data["reward"][row] == pytest.approx(reward, abs=1e-5), row
+        moved += not np.allclose(after, before, atol=1e-4)
+    assert moved > 0, "no candidate moved the object: the outcomes say nothing"
+    assert data["outcome_aims"].shape == (*data["features_tokens"].shape[:2], 3)
+    assert data["outcome_physics"].shape == (2, 5) and data["still_after"].dtype == bool
+
+
 def test_following_the_policy_plays_the_policys_own_episode():
     agent, env = _agent(), _env()
     collect_episode(env, agent, 3, 1, 1.0, np.random.default_rng(0))

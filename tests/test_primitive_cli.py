@@ -169,6 +169,34 @@ def test_a_shipped_primitive_folder_holds_what_evaluate_reads_and_evaluates_as_t
     assert not (tmp_path / "no.json").exists()
 
 
+def test_evaluate_set_reaches_a_primitive_runs_executor_settings(shipped, tmp_path, capsys):
+    """--set primitive.* changes the policy's own executor settings (its config's `primitive:`),
+    is recorded as an override, and is range-checked; other runs keep env.* only."""
+    run, library, report, _, _ = shipped
+    one = tmp_path / "one_primitive.json"
+    assert main(["evaluate", "--run", str(run), "--objects", str(library), "--split", "unseen",
+                 "--episodes", "2", "--record", "0", "--no-progress", "--set",
+                 "primitive.max_primitives=1", "--report", str(one)]) == 0
+    changed = json.loads(one.read_text())
+    assert changed["overrides"] == [{"key": "primitive.max_primitives", "old": 10, "new": 1}]
+    # One primitive per episode: never more policy periods than the run's own episodes, and
+    # fewer wherever the run's own episode took more than one primitive.
+    ticks = {mine["seed"]: (mine["steps"], theirs["steps"])
+             for mine, theirs in zip(changed["episodes"], report["episodes"])}
+    assert all(a <= b for a, b in ticks.values()) and any(a < b for a, b in ticks.values()), ticks
+    capsys.readouterr()
+    assert main(["evaluate", "--run", str(run), "--set", "primitive.push_steps=0", "--report",
+                 str(tmp_path / "no.json")]) == 2
+    one_error_line(capsys, "primitive.push_steps", ">= 1")
+    assert main(["evaluate", "--run", str(run), "--set", "gamma=0.5", "--report",
+                 str(tmp_path / "no.json")]) == 2
+    one_error_line(capsys, "gamma=0.5", "only env.* and primitive.*")
+    assert main(["evaluate", "--run", "scripted", "--set", "primitive.push_steps=2", "--report",
+                 str(tmp_path / "no.json")]) == 2
+    one_error_line(capsys, "primitive.push_steps=2", "unknown key 'primitive'")
+    assert not (tmp_path / "no.json").exists()
+
+
 def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path):
     """The stills come from evaluate's own episode of the object and seed (the report's first),
     the cloud painted by the policy's location scores."""

@@ -2,7 +2,8 @@
 
 A run is evaluated on exactly the env it was trained on: its config.yaml (task, controller
 action step, episode length, object or library). `--task` and `--set` override it (for a
-student run, the teacher part of its student diagram); what they change is printed and recorded
+student run, the teacher part of its student diagram; for a primitive run also its executor's
+`primitive.*` settings); what they change is printed and recorded
 in the report (`overrides`), with the task's name and the action step. The policy runs inside
 the diagram (PolicySystem, or for a student StudentPolicySystem with its GRU state in the
 context). Episodes go round-robin over the objects (the run's object, or the --split objects of
@@ -62,8 +63,9 @@ def add_arguments(parser):
                              "(default: the paper's 6D task)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="override an env setting of the run's config, e.g. --set "
-                             "task.episode_steps=50 (repeatable; printed and recorded in the "
-                             "report; default: none, the run's own settings)")
+                             "task.episode_steps=50, or for a primitive run its executor's, "
+                             "e.g. primitive.success_at_rest=true (repeatable; printed and "
+                             "recorded in the report; default: none, the run's own settings)")
     parser.add_argument("--seed", type=nonnegative_int, default=1000,
                         help="base seed: episode k on an object is seeded from it, the object's id "
                              "and k (the same --seed gives the same episodes)")
@@ -194,7 +196,17 @@ def run(args) -> int:
             run_cfg = dataclasses.replace(base, env=env)
         else:
             run_cfg = replace_task(base, args.task) if args.task is not None else base
-        run_cfg = apply_sets(run_cfg, args.set, only="env")
+        # A primitive run's executor settings (its config's `primitive:`) are the policy's
+        # own, so --set reaches them too, e.g. primitive.success_at_rest=true.
+        run_cfg = apply_sets(run_cfg, args.set,
+                             only=("env", "primitive") if kind == "primitive" else "env")
+        if kind == "primitive" and run_cfg.primitive != base.primitive:
+            from corn_drake.config.bounds import check_bounds
+            from corn_drake.config.primitive import check_reward_points
+
+            check_bounds(run_cfg.primitive, "primitive.")
+            check_reward_points(run_cfg.primitive)
+            agent.primitive_config = run_cfg.primitive
         if kind == "primitive" and (args.attention or args.stochastic):
             # Refused before any env is built, in one line naming the flag.
             flag = "--attention" if args.attention else "--stochastic"

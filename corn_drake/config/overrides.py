@@ -86,13 +86,14 @@ def on_library(cfg: TrainConfig, library: str, label: str = "--objects") -> Trai
                             "env.scene.object.object_id": ""}, label)
 
 
-def apply_sets(cfg: T, items: Iterable[str], only: str | None = None,
+def apply_sets(cfg: T, items: Iterable[str], only: str | tuple[str, ...] | None = None,
                option: str = "--set") -> T:
     """`cfg` with each `KEY=VALUE` of `items` loaded on top in turn, VALUE parsed as YAML (text
     as it is for a string field, so `--set encoder=123` is the file "123"). With `only`, a key
-    outside that section (e.g. "env") is refused."""
+    outside that section or those sections (e.g. "env", or ("env", "primitive")) is refused."""
     import yaml
 
+    sections = (only,) if isinstance(only, str) else only
     for item in items:
         label = f"{option} {item}"
         key, sep, text = item.partition("=")
@@ -100,8 +101,10 @@ def apply_sets(cfg: T, items: Iterable[str], only: str | None = None,
             raise InputError(f"{label}: expected KEY=VALUE, e.g. ppo.lr=1e-4 or "
                              "task.episode_steps=50")
         key, kind = resolve_key(key.strip(), label, type(cfg))
-        if only is not None and not key.startswith(f"{only}."):
-            raise InputError(f"{label}: only {only}.* settings apply here")
+        if sections is not None and not any(key.startswith(f"{section}.")
+                                            for section in sections):
+            raise InputError(f"{label}: only {' and '.join(f'{s}.*' for s in sections)} "
+                             "settings apply here")
         try:
             value = read_tagged_yaml(text)  # a variant's tag too: task.goal='!PlanarGoal {}'
         except yaml.YAMLError as e:

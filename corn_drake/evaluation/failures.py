@@ -28,7 +28,7 @@ from collections import Counter
 
 import numpy as np
 
-from corn_drake.config.primitive import REST_ANGULAR_SPEED, REST_LINEAR_SPEED
+from corn_drake.config.primitive import at_rest
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle, up_angle
 
@@ -84,15 +84,10 @@ def failure_category(row: dict, task) -> str:
     return "short_of_goal"
 
 
-def is_still(speed: dict) -> bool:
-    """Whether an object speed {"linear" (m/s), "angular" (rad/s)} is at rest."""
-    return speed["linear"] < REST_LINEAR_SPEED and speed["angular"] < REST_ANGULAR_SPEED
-
-
 def successes_ending_still(rows: list[dict]) -> int:
     """How many successful report rows ended with the object still (rows with end_speed)."""
     return sum(1 for row in rows if row.get("success") and row.get("end_speed") is not None
-               and is_still(row["end_speed"]))
+               and at_rest(row["end_speed"]))
 
 
 def failure_counts(rows: list[dict]) -> dict[str, int]:

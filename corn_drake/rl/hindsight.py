@@ -27,7 +27,8 @@ nn/primitive_features.with_goal (no encoder pass).
 Left out, on purpose: episodes that ended in a simulation error (their last observation is
 zeros); success is checked at the primitive's end only (the env checks every policy period); the
 tipping rule is not applied, so tip_penalty and hindsight goals do not go together
-(PrimitiveTrainConfig.check refuses both).
+(PrimitiveTrainConfig.check refuses both). With success_at_rest a relabelled success also needs
+the object still at the primitive's end (the observation's object_speed), as the env's does.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import math
 
 import numpy as np
 
+from corn_drake.config.primitive import REST_ANGULAR_SPEED, REST_LINEAR_SPEED, at_rest
 from corn_drake.contract import POSITION_DIM
 from corn_drake.nn.primitive_features import with_goal
 from corn_drake.systems.reward import within_tolerance
@@ -57,6 +59,11 @@ class HindsightRule:
     # (PrimitiveTrainConfig.hindsight_exit_goals).
     exit_goals: bool = True
     exit_penalty: float = 0.0  # PrimitiveConfig.exit_penalty
+    # PrimitiveConfig.success_at_rest and its speeds: a relabelled success also needs the
+    # object still at the primitive's end, as the env's own success then does.
+    at_rest: bool = False
+    rest_linear_speed: float = REST_LINEAR_SPEED
+    rest_angular_speed: float = REST_ANGULAR_SPEED
 
     @classmethod
     def for_run(cls, goals: int, primitive, task, exit_goals: bool = True
@@ -67,7 +74,8 @@ class HindsightRule:
         return cls(int(goals), primitive.progress_reward, primitive.turn_reward,
                    task.success_reward, task.success_position, task.success_orientation,
                    task.check_orientation, primitive.reward_points, bool(exit_goals),
-                   primitive.exit_penalty)
+                   primitive.exit_penalty, primitive.success_at_rest,
+                   primitive.rest_linear_speed, primitive.rest_angular_speed)
 
     @property
     def points_key(self) -> str:
@@ -87,19 +95,22 @@ class Achieved:
     position: np.ndarray  # (3,)
     goal_rotation: np.ndarray  # (3, 3)
     points: np.ndarray  # (8, 3) box corners, or (N, 3) cloud points
+    speed: np.ndarray | None = None  # (2,) linear m/s, angular rad/s; None: not observed
 
 
 def achieved_states(obs: dict[str, np.ndarray],
                     points_key: str = "object_keypoints") -> list[Achieved]:
     """One Achieved per row of a batch of primitive-env observations, its points from
-    `points_key` (HindsightRule.points_key)."""
+    `points_key` (HindsightRule.points_key), its speed from `object_speed` when given."""
     states = []
-    for position, goal, body_points in zip(obs["object_position"], obs["goal"],
-                                           obs[points_key]):
+    speeds = obs.get("object_speed")
+    for i, (position, goal, body_points) in enumerate(zip(obs["object_position"], obs["goal"],
+                                                          obs[points_key])):
         position = np.asarray(position, np.float64)
         points = np.asarray(body_points, np.float64).reshape(-1, POSITION_DIM).copy()
         points[:, 2] -= position[2]
-        states.append(Achieved(position, from_pose9(goal)[1], points))
+        speed = None if speeds is None else np.asarray(speeds[i], np.float64)
+        states.append(Achieved(position, from_pose9(goal)[1], points, speed))
     return states
 
 
@@ -120,9 +131,17 @@ def rotation_to(state: Achieved, goal: Achieved) -> float:
 
 
 def succeeded(rule: HindsightRule, state: Achieved, goal: Achieved) -> bool:
-    """The task's success rule (systems/reward.within_tolerance) at `state` for `goal`."""
+    """The task's success rule (systems/reward.within_tolerance) at `state` for `goal`; with
+    rule.at_rest also the object still there (an unobserved speed is refused, not guessed)."""
     d = goal.position - state.position
-    return within_tolerance(rule, math.hypot(d[0], d[1]), rotation_to(state, goal))
+    if not within_tolerance(rule, math.hypot(d[0], d[1]), rotation_to(state, goal)):
+        return False
+    if not rule.at_rest:
+        return True
+    if state.speed is None:
+        raise ValueError("hindsight at rest: the observation has no object_speed")
+    return at_rest({"linear": state.speed[0], "angular": state.speed[1]},
+                   rule.rest_linear_speed, rule.rest_angular_speed)
 
 
 def reward(rule: HindsightRule, before: Achieved, after: Achieved, goal: Achieved) -> float:

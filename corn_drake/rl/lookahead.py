@@ -34,6 +34,9 @@ class LookaheadStep:
     greedy_reward: float  # the policy's own greedy choice (candidate 0)
     step: tuple  # (obs, reward, terminated, truncated, info) of the chosen primitive
     start: object  # the env's snapshot before any candidate (to take another one instead)
+    poses: np.ndarray  # (K, 7) the object's pose [p, q_wxyz] after every candidate
+    still: np.ndarray  # (K,) whether the object was still after every candidate
+    successes: np.ndarray  # (K,) whether the task's status said success after every candidate
 
 
 def candidate_primitives(choice: dict, random_motions: int, rng: np.random.Generator
@@ -63,13 +66,19 @@ def lookahead_step(env, candidates: list[tuple[int, int, np.ndarray]]) -> Lookah
         raise InputError("lookahead: no candidate primitives (no usable location)")
     start = env.snapshot()
     rewards, chosen, best_after, best_step = [], None, None, None
+    poses, still, successes = [], [], []
     for index, (_, point, motion) in enumerate(candidates):
         env.restore(start)
         step = env.step({"point": point, "motion": motion})
         rewards.append(float(step[1]))
+        poses.append(env.object_pose())
+        still.append(env.object_still())
+        successes.append(step[4].get("status", {}).get("success", 0) > 0)
         if chosen is None or rewards[-1] > rewards[chosen]:
             chosen, best_after, best_step = index, env.snapshot(), step
     env.restore(best_after)
     _, point, motion = candidates[chosen]
     return LookaheadStep(point=point, motion=motion, rewards=np.asarray(rewards), chosen=chosen,
-                         greedy_reward=rewards[0], step=best_step, start=start)
+                         greedy_reward=rewards[0], step=best_step, start=start,
+                         poses=np.asarray(poses), still=np.asarray(still),
+                         successes=np.asarray(successes))

@@ -25,6 +25,7 @@ from torch import nn
 
 from corn_drake.errors import InputError
 from corn_drake.rl.lookahead import candidate_primitives, lookahead_step
+from corn_drake.systems.low_push import push_contact
 
 FEATURE_KEYS = ("tokens", "local", "global", "mask")
 
@@ -32,8 +33,13 @@ FEATURE_KEYS = ("tokens", "local", "global", "mask")
 def collect_episode(env, agent, seed: int, random_motions: int, follow_policy: float,
                     rng: np.random.Generator) -> tuple[list[dict], dict]:
     """(states, outcome) of one episode of `env` (a PrimitiveEnv, no policy inside) from
-    reset(seed): each state {"features": {key: (L, ...) float32}, "location" (K,), "motion"
-    (K, 3), "reward" (K,)}; outcome {"success", "primitives"}."""
+    reset(seed): each state {"features": {key: (L, ...) float32}, "outcome": {"pose" (7: the
+    object's [p, q_wxyz]), "goal" (7), "corners" (8, 3: its box keypoints, body frame), "aims"
+    (L, 3: where the executor aims at each location), "physics" (5)}, and per candidate
+    "location" (K,), "motion" (K, 3), "reward" (K,), "pose_after" (K, 7), "still_after" (K,),
+    "success_after" (K,)}; outcome {"success", "primitives"}. The pose, goal, corners and
+    poses after recompute the rewards (tests/test_lookahead_distill.py), so a model of the
+    primitives' outcomes can be fitted to the same data."""
     if not 0.0 <= follow_policy <= 1.0:
         raise InputError(f"follow_policy must be in [0, 1], got {follow_policy}")
     obs, info = env.reset(seed=seed)
@@ -41,13 +47,26 @@ def collect_episode(env, agent, seed: int, random_motions: int, follow_policy: f
     while True:
         features, _ = agent.features(obs)
         choice = agent.choose(obs)
+        # What a model of the primitives' outcomes needs: where the object is, its goal and
+        # its box keypoints (the reward's), besides every candidate's pose after.
+        pose, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
+        corners = env.body_points("object_keypoints").astype(np.float64)
+        # Where the executor aims for each location (a side push is lowered, low_push.py) and
+        # the episode's physics (mass, frictions, restitution).
+        aims = np.stack([push_contact(obs["cloud"], obs["normals"], int(i), env.primitive_cfg)[0]
+                         for i in choice["candidates"]])
         candidates = candidate_primitives(choice, random_motions, rng)
         result = lookahead_step(env, candidates)
         states.append({"features": {k: features[k][0].numpy().astype(np.float32)
                                     for k in FEATURE_KEYS},
+                       "outcome": {"pose": pose, "goal": goal, "corners": corners,
+                                   "aims": aims, "physics": np.asarray(obs["physics"], float)},
                        "location": np.array([c[0] for c in candidates], np.int64),
                        "motion": np.array([c[2] for c in candidates], np.float32),
-                       "reward": result.rewards.astype(np.float32)})
+                       "reward": result.rewards.astype(np.float32),
+                       "pose_after": result.poses.astype(np.float64),
+                       "still_after": result.still.astype(bool),
+                       "success_after": result.successes.astype(bool)})
         step = result.step
         if result.chosen != 0 and rng.random() < follow_policy:
             env.restore(result.start)  # the policy's own primitive instead (candidate 0)
@@ -61,8 +80,9 @@ def collect_episode(env, agent, seed: int, random_motions: int, follow_policy: f
 
 
 def stack_states(states: list[dict]) -> dict[str, np.ndarray]:
-    """The states as flat arrays: features per state (S, L, ...), candidates per row (state
-    index, location, motion, reward)."""
+    """The states as flat arrays: features per state (S, L, ...) and, when every state has
+    them, its outcome parts (outcome_pose, outcome_goal, ...); candidates per row (state index,
+    location, motion, reward, and pose_after, still_after, success_after with the outcomes)."""
     if not states:
         raise InputError("no lookahead states to stack")
     out = {f"features_{k}": np.stack([s["features"][k] for s in states]) for k in FEATURE_KEYS}
@@ -70,6 +90,11 @@ def stack_states(states: list[dict]) -> dict[str, np.ndarray]:
                                    for i, s in enumerate(states)])
     for key in ("location", "motion", "reward"):
         out[key] = np.concatenate([s[key] for s in states])
+    if all("outcome" in s for s in states):  # states collected with their outcomes
+        for key in ("pose", "goal", "corners", "aims", "physics"):
+            out[f"outcome_{key}"] = np.stack([s["outcome"][key] for s in states])
+        for key in ("pose_after", "still_after", "success_after"):
+            out[key] = np.concatenate([s[key] for s in states])
     return out
 
 
@@ -79,13 +104,15 @@ def _features(data: dict, index: torch.Tensor) -> dict[str, torch.Tensor]:
 
 def _q_at_rows(agent, data: dict, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(q1, q2) of the critic for data rows `rows`: each row's motion at its own location."""
-    features = _features(data, torch.as_tensor(data["state"])[rows])
-    # Every location gets the row's motion; only the row's own location is read.
-    motions = torch.as_tensor(data["motion"])[rows][:, None, :].expand(
-        -1, features["tokens"].shape[1], -1)
-    q1, q2 = agent.critic(features, motions)
-    at = torch.as_tensor(data["location"])[rows][:, None]
-    return q1.gather(1, at)[:, 0], q2.gather(1, at)[:, 0]
+    states = torch.as_tensor(data["state"])[rows]
+    at = torch.as_tensor(data["location"])[rows]
+    # The heads score each location alone (primitive_heads.py), so each row is scored as a
+    # state of one location, its own: the same values as scoring all L, L times cheaper.
+    features = {"tokens": torch.as_tensor(data["features_tokens"])[states, at][:, None],
+                "local": torch.as_tensor(data["features_local"])[states, at][:, None],
+                "global": torch.as_tensor(data["features_global"])[states]}
+    q1, q2 = agent.critic(features, torch.as_tensor(data["motion"])[rows][:, None, :])
+    return q1[:, 0], q2[:, 0]
 
 
 def critic_error(agent, data: dict[str, np.ndarray]) -> float:

@@ -113,7 +113,7 @@ class PrimitiveCollector:
         ended = sorted(step.final_obs)
         finals = dict(zip(ended, achieved_states(
             {k: np.stack([step.final_obs[i][k] for i in ended]) for k in
-             ("object_position", "goal", points)}, points))) if ended else {}
+             ("object_position", "goal", "object_speed", points)}, points))) if ended else {}
         stats = dict(zip(ended, step.episode_stats))  # both in env order
         for slot in range(len(locations)):
             episodes.add(slot, {k: v[slot] for k, v in features.items()}, locations[slot],

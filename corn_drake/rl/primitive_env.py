@@ -22,8 +22,9 @@ the primitive runs to its end, and the success stands only if the object is then
 goal (the in-diagram path judges the same way, at the period the executor is idle).
 
 Observation: the teacher's privileged keys (cloud, hand_state, ..., object_keypoints) plus
-`normals` (N, 3: the cloud's outward normals, world frame), `object_position` (3) and
-`executor` (the executor's status, STATUS_DIM). info adds `ticks` (policy periods the primitive
+`normals` (N, 3: the cloud's outward normals, world frame), `object_position` (3),
+`executor` (the executor's status, STATUS_DIM) and `object_speed` (2: linear m/s, angular rad/s;
+hindsight goals judge a relabelled success at rest by it). info adds `ticks` (policy periods the primitive
 took), `reached` (whether the pre-contact pose was reached) and `primitive` (the vector sent).
 """
 
@@ -35,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 from corn_drake.config.diagram_files import load_teacher_config
-from corn_drake.config.primitive import PrimitiveConfig, check_reward_points
+from corn_drake.config.primitive import PrimitiveConfig, at_rest, check_reward_points
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
@@ -46,7 +47,7 @@ from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_D
                                                    make_primitive)
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD, face_error, goal_keeps_face
 
-PRIMITIVE_OBS_KEYS = ("normals", "object_position", "executor")
+PRIMITIVE_OBS_KEYS = ("normals", "object_position", "executor", "object_speed")
 
 
 def _brief(value) -> str:
@@ -102,6 +103,7 @@ class PrimitiveEnv(DiagramEnv):
         spaces["normals"] = gym.spaces.Box(-1.0, 1.0, (n, POSITION_DIM), np.float32)
         spaces["object_position"] = gym.spaces.Box(-np.inf, np.inf, (POSITION_DIM,), np.float32)
         spaces["executor"] = gym.spaces.Box(-np.inf, np.inf, (STATUS_DIM,), np.float32)
+        spaces["object_speed"] = gym.spaces.Box(0.0, np.inf, (2,), np.float32)
         self.observation_space = gym.spaces.Dict(spaces)
         self.action_space = gym.spaces.Dict({
             "point": gym.spaces.Discrete(n),
@@ -114,6 +116,8 @@ class PrimitiveEnv(DiagramEnv):
             -1, POSITION_DIM)
         obs["object_position"] = np.asarray(self._position_port.Eval(self.context), np.float32)
         obs["executor"] = np.asarray(self._executor_port.Eval(self.context), np.float32)
+        speed = self.object_speed()
+        obs["object_speed"] = np.array([speed["linear"], speed["angular"]], np.float32)
         return obs
 
     def executor_status(self) -> np.ndarray:
@@ -193,9 +197,8 @@ class PrimitiveEnv(DiagramEnv):
 
     def object_still(self) -> bool:
         """The object moves slower than PrimitiveConfig's rest speeds (linear and angular)."""
-        speed = self.object_speed()
-        return speed["linear"] < self.primitive_cfg.rest_linear_speed and \
-            speed["angular"] < self.primitive_cfg.rest_angular_speed
+        return at_rest(self.object_speed(), self.primitive_cfg.rest_linear_speed,
+                       self.primitive_cfg.rest_angular_speed)
 
     def _judge_at_rest(self, info: dict, idle: bool) -> tuple[bool, bool]:
         """(terminated, truncated) under success_at_rest: the task's success stands only with
@@ -245,15 +248,20 @@ class PrimitiveEnv(DiagramEnv):
         the observation's cloud places them): the mean length of HACMan's goal flow."""
         return self._distance_to_goal("object_cloud")
 
+    def body_points(self, source: str = "object_keypoints") -> np.ndarray:
+        """(P, 3) points of the object in its body frame: its bounding-box keypoints (the
+        reward's, "object_keypoints") or its surface cloud ("object_cloud")."""
+        system = self.handles.teacher.sources[source]
+        return system.get_source_value(system.GetMyContextFromRoot(self.context)
+                                       ).value().reshape(-1, POSITION_DIM)
+
     def _distance_to_goal(self, source: str) -> float:
         from corn_drake.systems.reward import keypoints_at
         from corn_drake.transforms import quat_wxyz_to_matrix
 
         pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
         R = quat_wxyz_to_matrix(pose[3:])
-        system = self.handles.teacher.sources[source]
-        points = system.get_source_value(system.GetMyContextFromRoot(self.context)
-                                         ).value().reshape(-1, POSITION_DIM)
+        points = self.body_points(source)
         d = keypoints_at(points, pose[:3], R) - keypoints_at(points, goal[:3],
                                                             quat_wxyz_to_matrix(goal[3:]))
         return float(np.linalg.norm(d, axis=1).mean())

@@ -3,12 +3,11 @@ primitive agent choosing, at every location, the best of its actor's motion and 
 a 3 x 3 x 3 grid ({-1, 0, 1}^3 but 0) by its critic's Q1: README.md's item 33.
 
     .venv/bin/python docs/results/primitive/critic_motion_grid.py evaluate \
-        --run /tmp/atrest/push_turn_primitive --objects data/library --split unseen \
-        --episodes 200 --record 0 \
+        --run models/weights/push_turn_primitive --set primitive.success_at_rest=true \
+        --objects data/library --split unseen --episodes 200 --record 0 \
         --report docs/results/primitive/eval_push_turn_shipped_at_rest_critic_motion_grid.json
 
-(/tmp/atrest/push_turn_primitive: the shipped folder with `success_at_rest: true` under its
-config's `primitive:`, as the commands in README.md make it.) The arguments are `corn-drake`'s;
+The arguments are `corn-drake`'s;
 only the agent's choice changes (PrimitiveAgent.scores_and_motions, replaced in this process).
 """
 

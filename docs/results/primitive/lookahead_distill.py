@@ -50,7 +50,7 @@ def collect(args) -> None:
         path = args.out / f"episodes_{first:05d}.npz"
         if path.exists():
             continue
-        states = []
+        states, episodes, objects = [], [], []
         for k in range(first, min(first + args.chunk, end)):
             object_id = ids[k % len(ids)]
             if object_id not in envs:
@@ -61,14 +61,21 @@ def collect(args) -> None:
             episode, outcome = collect_episode(envs[object_id], agent, COLLECT_SEED + k,
                                                args.random_motions, args.follow_policy, rng)
             states += episode
+            episodes += [k] * len(episode)
+            objects += [object_id] * len(episode)
             outcomes.append({"episode": k, "object": object_id, **outcome})
             print(json.dumps(outcomes[-1]), flush=True)
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, **stack_states(states))
+            np.savez(f, **stack_states(states), episode=np.array(episodes, np.int64),
+                     object=np.array(objects))
 
 
 def load_data(files: list[Path]) -> dict[str, np.ndarray]:
+    """The files' states and rows as one data dict; only the keys every file has (files
+    collected before outcomes or objects were stored lack those)."""
     parts = [dict(np.load(p)) for p in files]
+    common = set.intersection(*(set(part) for part in parts))
+    parts = [{k: v for k, v in part.items() if k in common} for part in parts]
     out, offset = {}, 0
     for part in parts:  # the state indices of each file follow the previous files' states
         part["state"] = part["state"] + offset
