@@ -12,7 +12,7 @@ from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.lookahead_distill import (choice_quality, collect_episode, critic_error,
-                                             fit_actor, fit_critic, stack_states)
+                                             fit_actor, fit_critic, scores_quality, stack_states)
 from corn_drake.rl.primitive_env import PrimitiveEnv
 
 
@@ -79,6 +79,16 @@ def test_each_candidates_outcome_gives_back_its_reward(collected):
     assert moved > 0, "no candidate moved the object: the outcomes say nothing"
     assert data["outcome_aims"].shape == (*data["features_tokens"].shape[:2], 3)
     assert data["outcome_physics"].shape == (2, 5) and data["still_after"].dtype == bool
+
+
+def test_scores_quality_takes_each_states_highest_scored_candidate():
+    data = {"state": np.array([0, 0, 0, 1, 1]),
+            "reward": np.array([0.1, 0.5, -0.2, 0.0, 0.3])}
+    figures = scores_quality(np.array([3.0, 1.0, 2.0, -1.0, 5.0]), data)
+    assert figures["chosen"] == pytest.approx((0.1 + 0.3) / 2)
+    assert figures["best"] == pytest.approx((0.5 + 0.3) / 2)
+    assert figures["first"] == pytest.approx((0.1 + 0.0) / 2)
+    assert figures["mean"] == pytest.approx((0.4 / 3 + 0.15) / 2)
 
 
 def test_following_the_policy_plays_the_policys_own_episode():

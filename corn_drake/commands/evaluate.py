@@ -39,6 +39,16 @@ HELP = ("evaluate a trained teacher or student policy (success rate, per object)
 REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
+def with_primitive_task(base, task: str):
+    """A primitive run's config (PrimitiveTrainConfig) on another task: the primitive diagram
+    of `task` (a name in diagrams/tasks/ or a YAML file), the run's object or library kept."""
+    from corn_drake.config.diagram_files import load_primitive_env_config
+
+    env = load_primitive_env_config(task)
+    env.scene.object = base.env.scene.object
+    return dataclasses.replace(base, env=env)
+
+
 def add_arguments(parser):
     from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
@@ -189,11 +199,7 @@ def run(args) -> int:
             extra = {"env_steps": env_steps,
                      "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
         if args.task is not None and kind == "primitive":
-            from corn_drake.config.diagram_files import load_primitive_env_config
-
-            env = load_primitive_env_config(args.task)
-            env.scene.object = base.env.scene.object
-            run_cfg = dataclasses.replace(base, env=env)
+            run_cfg = with_primitive_task(base, args.task)
         else:
             run_cfg = replace_task(base, args.task) if args.task is not None else base
         # A primitive run's executor settings (its config's `primitive:`) are the policy's

@@ -129,11 +129,17 @@ def choice_quality(agent, data: dict[str, np.ndarray]) -> dict[str, float]:
     candidate's expectation."""
     with torch.no_grad():
         q1 = _q_at_rows(agent, data, torch.arange(len(data["reward"])))[0].numpy()
+    return scores_quality(q1, data)
+
+
+def scores_quality(scores: np.ndarray, data: dict[str, np.ndarray]) -> dict[str, float]:
+    """choice_quality's figures for any per-row `scores` (the highest-scored candidate of each
+    state is the one chosen): a critic's Q, or a model's predicted reward."""
     figures = {"chosen": [], "best": [], "first": [], "mean": []}
     state, reward = data["state"], data["reward"]
     for i in np.unique(state):
         rows = np.flatnonzero(state == i)
-        figures["chosen"].append(reward[rows[np.argmax(q1[rows])]])
+        figures["chosen"].append(reward[rows[np.argmax(scores[rows])]])
         figures["best"].append(reward[rows].max())
         figures["first"].append(reward[rows[0]])
         figures["mean"].append(reward[rows].mean())

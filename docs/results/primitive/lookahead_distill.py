@@ -87,9 +87,10 @@ def load_data(files: list[Path]) -> dict[str, np.ndarray]:
 
 def fit(args) -> None:
     base, agent, trained = load_primitive_run(args.run)
-    files = sorted(args.data.glob("episodes_*.npz"))
+    files = sorted(f for folder in args.data for f in folder.glob("episodes_*.npz"))
     if len(files) <= args.holdout_files:
-        raise SystemExit(f"{args.data}: {len(files)} data files, --holdout-files "
+        raise SystemExit(f"--data {' '.join(map(str, args.data))}: {len(files)} data files, "
+                         f"--holdout-files "
                          f"{args.holdout_files} leaves none to fit")
     held_out = load_data(files[-args.holdout_files:]) if args.holdout_files else None
     data = load_data(files[:len(files) - args.holdout_files])
@@ -111,7 +112,7 @@ def fit(args) -> None:
     save_checkpoint(out / "checkpoints" / "last.pt",
                     {"agent": agent.network_state(), "global_step": trained})
     write_json(out / "distill_history.json",
-               {"run": str(args.run), "data": str(args.data),
+               {"run": str(args.run), "data": [str(d) for d in args.data],
                 "states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
                 "critic_loss": args.critic_loss, "critic_epochs": args.critic_epochs,
                 "actor_epochs": args.actor_epochs, "held_out_files": args.holdout_files, "critic_held_out_error_before": before,
@@ -143,7 +144,8 @@ def main() -> None:
     c.add_argument("--out", type=Path, required=True)
     f = sub.add_parser("fit")
     f.add_argument("run")
-    f.add_argument("--data", type=Path, required=True)
+    f.add_argument("--data", type=Path, nargs="+", required=True,
+                   help="collect folders (their files in name order; the last ones held out)")
     f.add_argument("--critic-epochs", type=int, default=20)
     f.add_argument("--critic-loss", choices=("mse", "rank"), default="mse",
                    help="fit the rewards' values, or their order within each state")
