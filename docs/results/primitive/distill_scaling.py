@@ -37,16 +37,19 @@ from corn_drake.storage.atomic_files import write_json  # noqa: E402
 BATCH_ROWS = 256  # rows per update (whole states, fit_critic's rank batches)
 
 
+# The data's per-candidate arrays (rl/lookahead_distill.stack_states; the last three only in
+# data collected with their outcomes); every other array but "state" has one entry per state.
+ROW_KEYS = ("location", "motion", "reward", "pose_after", "still_after", "success_after")
+
+
 def select_states(data: dict, states: np.ndarray) -> dict:
-    """The data of `states` (state indices), state indices renumbered 0..len-1."""
+    """The data of `states` (state indices), their candidates' rows with them, state indices
+    renumbered 0..len-1."""
     states = np.sort(np.asarray(states))
     number = np.full(len(data["features_tokens"]), -1, np.int64)
     number[states] = np.arange(len(states))
     rows = np.flatnonzero(number[data["state"]] >= 0)
-    out = {k: v[states] for k, v in data.items()
-           if k.startswith("features_") or k in ("object", "episode")}
-    for key in ("location", "motion", "reward"):
-        out[key] = data[key][rows]
+    out = {k: v[rows] if k in ROW_KEYS else v[states] for k, v in data.items() if k != "state"}
     out["state"] = number[data["state"][rows]]
     return out
 

@@ -60,7 +60,7 @@ SCALE = 10.0  # metres -> decimetres, as the policy's features
 PLANAR = np.array([1.0, 1.0, 0.0])  # the reward's keypoints drop the origin's height
 OUTCOME_KEYS = ("outcome_pose", "outcome_goal", "outcome_corners", "outcome_aims",
                 "outcome_physics")
-ROW_KEYS = ("pose_after", "still_after", "success_after")
+OUTCOME_ROW_KEYS = ("pose_after", "still_after", "success_after")
 BANK = 32  # uniform motions tried at every location when choosing (besides the actor's)
 
 
@@ -224,18 +224,9 @@ def model_quality(model: OutcomeModel, data: dict, tokens: bool, task,
             "chosen": scores_quality(scores, data)["chosen"]}
 
 
-def _with_outcomes(data: dict, states: np.ndarray) -> dict:
-    out = select_states(data, states)
-    for key in OUTCOME_KEYS:
-        out[key] = data[key][np.sort(states)]
-    rows = np.isin(data["state"], states)
-    for key in ROW_KEYS:
-        out[key] = data[key][rows]
-    return out
-
-
 def study(args) -> None:
-    data, objects = load_study_data(args.data, args.holdout_objects, OUTCOME_KEYS + ROW_KEYS)
+    data, objects = load_study_data(args.data, args.holdout_objects,
+                                    OUTCOME_KEYS + OUTCOME_ROW_KEYS)
     base, _, _ = load_primitive_run(args.run)
     task, progress = base.env.task, base.primitive.progress_reward
     report = {"run": args.run, "data": [str(d) for d in args.data],
@@ -244,8 +235,8 @@ def study(args) -> None:
     for split in range(args.splits):
         held, _ = held_out_objects(objects, args.holdout_objects, split)
         inside = np.isin(data["object"], held)
-        held_out = _with_outcomes(data, np.flatnonzero(inside))
-        train = _with_outcomes(data, np.flatnonzero(~inside))
+        held_out = select_states(data, np.flatnonzero(inside))
+        train = select_states(data, np.flatnonzero(~inside))
         row = {"split": split, "train_states": int(len(train["features_tokens"])),
                "held_out_states": int(len(held_out["features_tokens"]))}
         _, critic_agent, _ = load_primitive_run(args.run)
@@ -273,7 +264,7 @@ def study(args) -> None:
 def fit(args) -> None:
     from corn_drake.storage.checkpoint_files import save_checkpoint
 
-    data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + ROW_KEYS)
+    data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
     model = fit_model(data, args.tokens, args.updates, 0)
     save_checkpoint(args.out, {"model": model.state_dict(),
                                "inputs": int(model.net[0].in_features),
@@ -286,8 +277,9 @@ def fit(args) -> None:
 
 # --- the policy that chooses by the model -------------------------------------------------------
 def obs_candidates(agent, obs: dict, bank: np.ndarray):
-    """(Candidates, [(location, cloud point, motion)], the agent's features' mask) for one
-    observation: the actor's motion and every bank motion at every usable location."""
+    """(Candidates, [(location, cloud point, motion)], which locations are usable (L,), every
+    location's cloud point (L,)) for one observation: the actor's motion and every bank motion
+    at every usable location."""
     from corn_drake.systems.low_push import push_contact
 
     features, points = agent.features(obs)
@@ -322,12 +314,16 @@ def evaluate(args, rest: list[str]) -> int:
     from corn_drake.rl import primitive_agent
     from corn_drake.storage.checkpoint_files import load_checkpoint
 
+    if "--run" not in rest[:-1]:
+        raise SystemExit("outcome_model.py evaluate MODEL --run RUN ...: --run names the "
+                         "primitive run whose actor proposes motions")
     saved = load_checkpoint(args.model)
     model = OutcomeModel(saved["inputs"])
     model.load_state_dict(saved["model"])
     model.eval()
     tokens = saved["tokens"]
     bank = np.random.default_rng(0).uniform(-1.0, 1.0, (BANK, 3))
+    run_cfg = evaluated_config(rest)  # the evaluated task's tolerances score the candidates
 
     def choose(self, obs):
         """PrimitiveAgent.choose's answer, chosen by the outcome model's predicted reward."""
@@ -335,8 +331,8 @@ def evaluate(args, rest: list[str]) -> int:
         x, now, frames = model_inputs(candidates, tokens)
         with torch.no_grad():
             prediction = model(x, now)
-        task = choose.task
-        scores = predicted_rewards(candidates, frames, prediction, task, choose.progress)
+        scores = predicted_rewards(candidates, frames, prediction, run_cfg.env.task,
+                                   run_cfg.primitive.progress_reward)
         best = int(np.argmax(scores))
         location, point, motion = options[best]
         per_location = np.full(len(usable), -np.inf)
@@ -349,11 +345,6 @@ def evaluate(args, rest: list[str]) -> int:
         return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
                 "scores": shown, "usable": usable, "candidates": points, "motions": motions}
 
-    if "--run" not in rest[:-1]:
-        raise SystemExit("outcome_model.py evaluate MODEL --run RUN ...: --run names the "
-                         "primitive run whose actor proposes motions")
-    run_cfg = evaluated_config(rest)
-    choose.task, choose.progress = run_cfg.env.task, run_cfg.primitive.progress_reward
     primitive_agent.PrimitiveAgent.choose = choose
     code = cli(["evaluate", *rest])
     if code == 0 and "--report" in rest[:-1]:
