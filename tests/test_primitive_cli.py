@@ -217,6 +217,78 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     assert (gallery / entry["image"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
+        shipped, tmp_path, capsys):
+    """A run folder written by write_outcome_run (config chooser: outcome_model) chooses by its
+    model in evaluate, ships its model with its card, and the shipped folder replays its
+    episodes; a missing model file or a training run with that chooser is refused by name."""
+    import shutil
+
+    import torch
+
+    from corn_drake.rl.outcome_model import MODEL_FILE, OutcomeModel
+    from corn_drake.rl.outcome_run import outcome_run_config, write_outcome_run
+
+    run, library, critic_report, shipped_folder, _ = shipped
+    torch.manual_seed(1)
+    model = OutcomeModel(38)
+    torch.nn.init.normal_(model.net[-1].weight, std=0.1)  # the fresh model says "no motion"
+    outcome = tmp_path / "runs" / "outcome"
+    write_outcome_run(run, outcome_run_config(run, None, ["primitive.max_primitives=3"]),
+                      model.eval(), False, {"states": 7}, outcome)
+    assert sorted(p.relative_to(outcome).as_posix() for p in outcome.rglob("*")
+                  if p.is_file()) == ["checkpoints/last.pt", "config.yaml", MODEL_FILE]
+    report_path = tmp_path / "eval_outcome.json"
+    args = ["--objects", str(library), "--split", "unseen", "--episodes", "2", "--record", "0",
+            "--no-progress"]
+    assert main(["evaluate", "--run", str(outcome), *args, "--report", str(report_path)]) == 0
+    report = json.loads(report_path.read_text())
+    _check_report(report, 2)
+    assert critic_report["chooser"] == "critic" and report["chooser"] == "outcome_model"
+    assert report["outcome_model"]["states"] == 7 and report["outcome_model"]["bank_motions"] == 32
+    assert not report.get("overrides")  # the run's own settings (3 primitives) are its config's
+
+    from corn_drake.rl.primitive_agent import load_primitive_run
+
+    # Shipped alone its folder holds a copy of the actor and critic; beside the shipped folder
+    # of the run that proposes its motions, it names that folder instead.
+    alone, beside = tmp_path / "weights" / "outcome_primitive", \
+        shipped_folder.parent / "outcome_primitive"
+    for out in (alone, beside):
+        assert main(["ship", "--run", str(outcome), "--report", str(report_path),
+                     "--library-command",
+                     f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                     "--train-command", "outcome_model.py fit ...", "--out", str(out)]) == 0
+        card = json.loads((out / "card.json").read_text())
+        shipped_cfg, shipped_agent, _ = load_primitive_run(out)
+        assert shipped_cfg.primitive.max_primitives == 3
+        assert shipped_agent.outcome_chooser is not None
+        assert card["chooser"] == "outcome_model" and card["outcome_model"]["file"] == MODEL_FILE
+        assert MODEL_FILE in card["bytes"]
+        assert ("checkpoints/last.pt" in card["bytes"]) == (out == alone), card["bytes"]
+        assert shipped_cfg.agent_weights == ("" if out == alone else "../push_primitive")
+        again = tmp_path / "eval_shipped_outcome.json"
+        assert main(["evaluate", "--run", str(out), *args, "--report", str(again)]) == 0
+        for mine, theirs in zip(json.loads(again.read_text())["episodes"], report["episodes"]):
+            assert (mine["seed"], mine["success"], mine["steps"]) == \
+                (theirs["seed"], theirs["success"], theirs["steps"])
+
+    capsys.readouterr()
+    broken = tmp_path / "broken"
+    shutil.copytree(outcome, broken)
+    (broken / MODEL_FILE).unlink()
+    assert main(["evaluate", "--run", str(broken), *args, "--report",
+                 str(tmp_path / "no.json")]) == 2
+    one_error_line(capsys, "outcome_model.pt", "no outcome model")
+    assert _train(tmp_path / "no_run", 8, "--set", "chooser=outcome_model") == 2
+    one_error_line(capsys, "chooser 'outcome_model'", "outcome_model.py fit")
+    assert _train(tmp_path / "no_run", 8, "--set", "chooser=oracle") == 2
+    one_error_line(capsys, "chooser must be one of critic, outcome_model", "'oracle'")
+    assert _train(tmp_path / "no_run", 8, "--set", "agent_weights=../push_primitive") == 2
+    one_error_line(capsys, "agent_weights", "its own actor and critic")
+    assert not (tmp_path / "no.json").exists() and not (tmp_path / "no_run").exists()
+
+
 # --- bench -------------------------------------------------------------------------------------
 def test_bench_primitive_reports_its_rates_against_the_dense_teacher(tmp_path):
     path = tmp_path / "bench.json"

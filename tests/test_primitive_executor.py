@@ -309,10 +309,25 @@ def _step_until_count(env: PrimitiveEnv, count: int, max_ticks: int = 80) -> dic
     raise AssertionError(f"no primitive {count} within {max_ticks} ticks")
 
 
-@pytest.mark.parametrize("locations", ["patch", "point"])
-def test_the_reported_location_is_the_policys_own_choice(locations):
+def _choosing_by_an_outcome_model(agent, task):
+    """The agent choosing by an outcome model of random weights (its output layer too)."""
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.outcome_model import OutcomeModel
+
+    model = OutcomeModel(38)
+    torch.nn.init.normal_(model.net[-1].weight, std=0.1)
+    agent.outcome_chooser, agent.task = OutcomeChooser(model.eval(), tokens=False), task
+    return agent
+
+
+@pytest.mark.parametrize("locations, chooser", [("patch", "critic"), ("point", "critic"),
+                                                ("patch", "outcome_model")])
+def test_the_reported_location_is_the_policys_own_choice(locations, chooser):
     agent = _agent(locations=locations)
-    env = PrimitiveEnv(_config("box"), agent=agent)
+    cfg = _config("box")
+    if chooser == "outcome_model":
+        agent = _choosing_by_an_outcome_model(agent, cfg.task)
+    env = PrimitiveEnv(cfg, agent=agent)
     obs, _ = env.reset(seed=3)
     first = agent.choose(obs)  # the first primitive is chosen at the episode's first tick
     policy = env.handles.policy

@@ -46,7 +46,16 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
     assert card["episodes"] == len(report["episodes"]) and report["split"] == "unseen"
     assert report["policy"] == card["policy"] and report["task"] == card["task"]
     assert not report.get("overrides")
-    state = torch.load(folder / "checkpoints" / "last.pt", weights_only=False)
+    # An outcome-model folder reads a sibling shipped folder's actor and critic (agent_weights).
+    if card.get("chooser") == "outcome_model":
+        from corn_drake.config.loader import load_config
+        from corn_drake.config.primitive import PrimitiveTrainConfig
+
+        weights = folder / load_config(PrimitiveTrainConfig, folder / "config.yaml").agent_weights
+    else:
+        weights = folder
+    assert (weights / "card.json").is_file()
+    state = torch.load(weights / "checkpoints" / "last.pt", weights_only=False)
     assert state["global_step"] == card["env_steps"]
     assert card["bytes"] == {p.relative_to(folder).as_posix(): p.stat().st_size
                              for p in sorted(folder.rglob("*"))
@@ -73,8 +82,10 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
     if card["policy"] == "primitive":  # a contact-primitive run: its own config, steps counted
         from corn_drake.rl.primitive_agent import load_primitive_run  # in primitives
 
-        cfg, _, _ = load_primitive_run(folder)
+        cfg, agent, _ = load_primitive_run(folder)
         assert card["env_steps_unit"] == "primitives"
+        assert cfg.chooser == card.get("chooser", "critic")
+        assert (agent.outcome_chooser is not None) == (cfg.chooser == "outcome_model")
     else:
         cfg = load_run_config(folder)
     assert cfg.policy == card["policy"] and cfg.env.task.name == card["task"]

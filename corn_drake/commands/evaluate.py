@@ -39,16 +39,6 @@ HELP = ("evaluate a trained teacher or student policy (success rate, per object)
 REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
-def with_primitive_task(base, task: str):
-    """A primitive run's config (PrimitiveTrainConfig) on another task: the primitive diagram
-    of `task` (a name in diagrams/tasks/ or a YAML file), the run's object or library kept."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
-
-    env = load_primitive_env_config(task)
-    env.scene.object = base.env.scene.object
-    return dataclasses.replace(base, env=env)
-
-
 def add_arguments(parser):
     from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
@@ -191,7 +181,9 @@ def run(args) -> int:
             base, agent, env_steps = load_primitive_run(args.run, args.checkpoint)
             policy = base.policy
             extra = {"env_steps": env_steps, "env_steps_unit": "primitives",
-                     "checkpoint": agent.checkpoint_file}
+                     "checkpoint": agent.checkpoint_file, "chooser": base.chooser}
+            if agent.outcome_chooser is not None:
+                extra["outcome_model"] = agent.outcome_chooser.facts
         else:
             base, agent, env_steps = load_run_with_step(args.run, args.checkpoint)
             policy = base.policy
@@ -199,6 +191,8 @@ def run(args) -> int:
             extra = {"env_steps": env_steps,
                      "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
         if args.task is not None and kind == "primitive":
+            from corn_drake.config.diagram_files import with_primitive_task
+
             run_cfg = with_primitive_task(base, args.task)
         else:
             run_cfg = replace_task(base, args.task) if args.task is not None else base
@@ -213,6 +207,9 @@ def run(args) -> int:
             check_bounds(run_cfg.primitive, "primitive.")
             check_reward_points(run_cfg.primitive)
             agent.primitive_config = run_cfg.primitive
+        if kind == "primitive":
+            # An outcome-model chooser predicts the evaluated task's reward and success.
+            agent.task = run_cfg.env.task
         if kind == "primitive" and (args.attention or args.stochastic):
             # Refused before any env is built, in one line naming the flag.
             flag = "--attention" if args.attention else "--stochastic"

@@ -14,7 +14,11 @@ OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, an
   {"kind": "student", "student": ...} weights, which hold its encoder, and its config keeps the
   teacher it was distilled from as recorded. A contact-primitive run (`train --policy
   primitive`) ships its actor and critic; its replay files (checkpoints/replay_*.npz, hundreds
-  of MB, only for resuming) and its TD3 targets and optimisers stay behind;
+  of MB, only for resuming) and its TD3 targets and optimisers stay behind; one that chooses by
+  an outcome model (config `chooser: outcome_model`) ships its outcome_model.pt too, and its
+  card adds `chooser` and the model's facts (`outcome_model`); where a sibling weights folder
+  holds its very actor and critic, its config names that folder (`agent_weights`) instead of
+  a copy;
 - encoder.pt: the frozen encoder the policy reads (corn, pn, p2v-lite, rot), copied;
 - card.json: `policy`, `task`, `env_steps`, `success_rate` and `episodes` of `--report` (an
   `evaluate` report of this very run on the unseen split, kept in docs/results/), the
@@ -178,20 +182,36 @@ def _make_folder(out: Path) -> None:
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
 
 
-def _save_weights(out: Path, state: dict) -> None:
-    """checkpoints/last.pt, byte for byte the same for the same weights: saved through a
-    buffer, since torch.save names its archive after the (temporary) file it writes, and a
-    re-shipped folder should not add a new copy of unchanged weights to the repository."""
+def _weights_bytes(state: dict) -> bytes:
+    """checkpoints/last.pt's bytes, the same for the same weights: saved through a buffer,
+    since torch.save names its archive after the (temporary) file it writes, and a re-shipped
+    folder should not add a new copy of unchanged weights to the repository."""
     import io
 
     import torch
 
-    from corn_drake.storage.atomic_files import atomic_path
-
     buffer = io.BytesIO()
     torch.save(state, buffer)
+    return buffer.getvalue()
+
+
+def _save_weights(out: Path, state: dict) -> None:
+    """checkpoints/last.pt of `state`, written atomically (_weights_bytes)."""
+    from corn_drake.storage.atomic_files import atomic_path
+
     with atomic_path(out / "checkpoints" / "last.pt") as tmp:
-        Path(tmp).write_bytes(buffer.getvalue())
+        Path(tmp).write_bytes(_weights_bytes(state))
+
+
+def _identical_sibling_weights(content: bytes, out: Path) -> str | None:
+    """"../NAME" when a sibling of the weights folder `out` holds a checkpoints/last.pt of
+    exactly these bytes; None otherwise."""
+    for sibling in sorted(out.parent.glob("*/checkpoints/last.pt")):
+        folder = sibling.parent.parent
+        if folder.name != out.name and sibling.stat().st_size == len(content) and \
+                sibling.read_bytes() == content:
+            return f"../{folder.name}"
+    return None
 
 
 def _ship_teacher(run_dir: Path, out: Path, library: str) -> dict:
@@ -246,12 +266,13 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a contact-primitive run's config, actor and critic and encoder into `out`; its
     card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
     the replay files and the learner's targets and optimisers are for resuming a run."""
-    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.rl.checkpoints import run_encoder_path, run_relative_path
     from corn_drake.rl.primitive_agent import load_primitive_run
     from corn_drake.run_folders.config_file import write_run_config
 
     cfg, agent, _ = load_primitive_run(run_dir)  # the run must load as evaluate would load it
-    state = _weights(run_dir, "agent")
+    state = _weights(run_relative_path(run_dir, cfg.agent_weights) if cfg.agent_weights
+                     else run_dir, "agent")
     _make_folder(out)
     # A run's config names its own copy, encoder.pt, relative to the run folder.
     cfg.encoder = run_encoder_path(run_dir, cfg.encoder)
@@ -266,8 +287,19 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
         cfg.encoder = shared
     if cfg.env.scene.object.kind == "library":
         cfg.env.scene.object.library = library
+    weights = {"agent": state["agent"], "global_step": state["global_step"]}
+    cfg.agent_weights = ""
+    if cfg.chooser == "outcome_model":
+        # Its actor and critic are byte for byte those of the shipped folder that proposes its
+        # motions: named there, not copied (models/weights' size budget), as the encoder.
+        cfg.agent_weights = _identical_sibling_weights(_weights_bytes(weights), out) or ""
     write_run_config(cfg, out)
-    _save_weights(out, {"agent": state["agent"], "global_step": state["global_step"]})
+    if cfg.agent_weights:
+        stale = out / "checkpoints" / "last.pt"  # a copy a previous ship of OUT left
+        stale.unlink(missing_ok=True)
+        (out / "checkpoints").rmdir()
+    else:
+        _save_weights(out, weights)
     # Its learning curve travels too (the checkpoint's history rows): the run folder does not
     # outlive its machine, and the card's number should come with how it was reached.
     from corn_drake.storage.atomic_files import write_json
@@ -275,7 +307,18 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     write_json(out / "training_history.json",
                {"policy": cfg.policy, "task": cfg.env.task.name,
                 "history": state.get("history", [])})
-    return {"policy": cfg.policy, "task": cfg.env.task.name,
+    chooser = {"chooser": cfg.chooser}
+    if agent.outcome_chooser is not None:
+        # The model that chooses travels with the actor that proposes motions.
+        import shutil
+
+        from corn_drake.rl.outcome_model import MODEL_FILE
+        from corn_drake.storage.atomic_files import atomic_path
+
+        with atomic_path(out / MODEL_FILE) as tmp:
+            shutil.copyfile(run_dir / MODEL_FILE, tmp)
+        chooser["outcome_model"] = {"file": MODEL_FILE, **agent.outcome_chooser.facts}
+    return {**chooser, "policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
             "locations": cfg.locations, "location_count": agent.location_count(
                 cfg.env.scene.object.cloud_points),

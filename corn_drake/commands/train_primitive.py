@@ -67,6 +67,13 @@ def checked_config(cfg):
 
         library_train_ids(cfg.env.scene.object.library)
     cfg.check()
+    if cfg.agent_weights:
+        raise InputError(f"agent_weights {cfg.agent_weights!r}: a training run keeps its own "
+                         "actor and critic in its checkpoints")
+    if cfg.chooser != "critic":
+        raise InputError(f"chooser {cfg.chooser!r}: TD3 trains the critic's choice; a run that "
+                         "chooses by an outcome model is written by docs/results/primitive/"
+                         "outcome_model.py fit")
     if cfg.init_from:
         from corn_drake.run_folders.config_file import run_kind
 

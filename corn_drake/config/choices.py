@@ -19,3 +19,6 @@ PRIMITIVE_LOCATIONS = ("patch", "point")
 # The body points the primitive env's progress reward measures the distance to the goal on
 # (PrimitiveConfig.reward_points): the bounding-box corners, or the object's surface cloud.
 PRIMITIVE_REWARD_POINTS = ("keypoints", "cloud")
+# How a primitive run's agent chooses (PrimitiveTrainConfig.chooser): its critic's scores, or the
+# reward predicted by its outcome model (rl/outcome_chooser.py; the run's outcome_model.pt).
+PRIMITIVE_CHOOSERS = ("critic", "outcome_model")

@@ -86,3 +86,11 @@ def load_student_config(path: str | Path | None = None,
     cfg = load_config(StudentDiagramConfig, path, defaults=base or StudentDiagramConfig())
     cfg.check()
     return cfg
+
+
+def with_primitive_task(base, task: str):
+    """A primitive run's config (PrimitiveTrainConfig) on another task: the primitive diagram
+    of `task` (a name in diagrams/tasks/ or a YAML file), the run's object or library kept."""
+    env = load_primitive_env_config(task)
+    env.scene.object = base.env.scene.object
+    return dc.replace(base, env=env)

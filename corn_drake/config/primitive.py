@@ -14,7 +14,8 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 
 from corn_drake.config.bounds import check_bounds
-from corn_drake.config.choices import PRIMITIVE_LOCATIONS, PRIMITIVE_REWARD_POINTS
+from corn_drake.config.choices import (PRIMITIVE_CHOOSERS, PRIMITIVE_LOCATIONS,
+                                       PRIMITIVE_REWARD_POINTS)
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import RunSettings
 from corn_drake.errors import InputError
@@ -185,6 +186,18 @@ class PrimitiveTrainConfig(RunSettings):
     # update time (docs/results/primitive/, item 19), hence "patch" by default.
     locations: str = "patch"
     point_locations: int = 64
+    # How evaluation chooses: "critic", the location of highest Q with the actor's motion there;
+    # "outcome_model", the candidate (the actor's motion or a fixed bank's, at every location)
+    # of highest reward predicted by the run's outcome_model.pt (rl/outcome_chooser.py), a run
+    # folder written by docs/results/primitive/outcome_model.py fit. Measured on the 200 unseen
+    # push_turn episodes: 0.330 against the critic's 0.295 (0.245 / 0.130 at rest; item 35).
+    # Training (TD3) always explores with the critic's scores.
+    chooser: str = "critic"
+    # The folder whose checkpoints/ hold this run's actor and critic, when not its own: a
+    # shipped outcome-model folder names the sibling weights folder whose actor proposes its
+    # motions ("../push_turn_primitive", `corn-drake ship`), so models/weights does not carry
+    # the same 1.7 MB twice. Relative to this folder (rl/checkpoints.run_relative_path).
+    agent_weights: str = ""
     replay_capacity: int = 200_000
     learning_starts: int = 256
     updates_per_step: int = 1
@@ -233,6 +246,9 @@ class PrimitiveTrainConfig(RunSettings):
         """InputError naming the first field a run cannot start with (the env's too)."""
         check_bounds(self)  # nested configs too (primitive, env)
         check_reward_points(self.primitive)
+        if self.chooser not in PRIMITIVE_CHOOSERS:
+            raise InputError(f"chooser must be one of {', '.join(PRIMITIVE_CHOOSERS)}, got "
+                             f"{self.chooser!r}")
         if self.locations not in PRIMITIVE_LOCATIONS:
             raise InputError(f"locations must be one of {', '.join(PRIMITIVE_LOCATIONS)}, got "
                              f"{self.locations!r}")

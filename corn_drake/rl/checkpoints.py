@@ -21,6 +21,14 @@ def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
     return encoder
 
 
+def run_relative_path(run_dir: str | Path, name: str) -> Path:
+    """A folder a run's config names (PrimitiveTrainConfig.agent_weights): relative to the run
+    folder where it exists there, else as given."""
+    if not Path(name).is_absolute() and (Path(run_dir) / name).exists():
+        return Path(run_dir) / name
+    return Path(name)
+
+
 def snapshot_path(run_dir: str | Path, step: int) -> Path:
     """Where a training run keeps its checkpoint of env step `step` (TrainConfig.snapshot_every)."""
     return Path(run_dir) / "checkpoints" / f"step_{step:09d}.pt"

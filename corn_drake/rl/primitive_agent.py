@@ -3,8 +3,10 @@ a per-location actor (the push motion at each location) and a twin per-location 
 
 The policy's choice for an observation: the location with the highest score, the score being
 the critic's Q1 at that location with the actor's motion there (HACMan's per-point critic), and
-that motion. `choose` returns the chosen location's index into the cloud (the env action's
-`point`), the motion, the location's own index and the scores of every location (for display).
+that motion; or, for a run whose config's `chooser` is "outcome_model", the candidate of highest
+reward predicted by its outcome model (rl/outcome_chooser.py). `choose` returns the chosen
+location's index into the cloud (the env action's `point`), the motion, the location's own index
+and the scores of every location (for display).
 
 Checkpoint (`agent` entry of a primitive run's checkpoint, state_dict()): the actor's and the
 critic's weights and the network shape; the encoder is the run's encoder.pt, as for the dense
@@ -60,6 +62,11 @@ class PrimitiveAgent(nn.Module):
         dim = encoder.network.dim
         self.actor = PrimitiveActor(dim, LOCAL_DIM, global_dim(dim), hidden)
         self.critic = PrimitiveCritic(dim, LOCAL_DIM, global_dim(dim), hidden)
+        # Set by load_primitive_run for a run that chooses by its outcome model
+        # (rl/outcome_chooser.OutcomeChooser), with the task whose reward it predicts (evaluate
+        # replaces it with the evaluated task's).
+        self.outcome_chooser = None
+        self.task = None
         self.checkpoint_file = None  # the file the weights came from (evaluate's report)
 
     @torch.no_grad()
@@ -99,6 +106,8 @@ class PrimitiveAgent(nn.Module):
         single, _ = obs_to_torch(obs)
         if not single:
             raise ValueError("PrimitiveAgent.choose takes one observation (cloud (N, 3))")
+        if self.outcome_chooser is not None:
+            return self.outcome_chooser.choose(self, obs, self.task)
         features, candidates = self.features(obs)
         scores, motions = self.scores_and_motions(features)
         location = int(torch.argmax(scores[0]))
@@ -158,21 +167,26 @@ def agent_for(cfg, encoder) -> PrimitiveAgent:
 def load_primitive_run(run_dir, checkpoint: str = ""):
     """(PrimitiveTrainConfig, PrimitiveAgent in eval mode carrying `primitive_config`, the
     primitives it was trained for) of a `train --policy primitive` run folder, from its
-    config.yaml, encoder.pt and checkpoints/last.pt (prev.pt if need be) or, given
-    `checkpoint`, that file of its checkpoints folder."""
+    config.yaml, encoder.pt and checkpoints/last.pt (prev.pt if need be; its agent_weights
+    folder's when the config names one) or, given `checkpoint`, that file of its checkpoints
+    folder; with chooser "outcome_model", its
+    outcome_model.pt too (the agent then chooses by it, for the config's task)."""
     from pathlib import Path
 
     from corn_drake.config.loader import load_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
-    from corn_drake.errors import MissingInputError
-    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.config.choices import PRIMITIVE_CHOOSERS
+    from corn_drake.errors import InputError, MissingInputError
+    from corn_drake.rl.checkpoints import run_encoder_path, run_relative_path
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.run_folders.config_file import run_config_path
     from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
 
     run_dir = Path(run_dir)
     cfg = load_config(PrimitiveTrainConfig, run_config_path(run_dir))
-    ckpt = run_dir / "checkpoints" / (checkpoint or "last.pt")
+    # A shipped outcome-model folder reads a sibling folder's actor and critic (agent_weights).
+    weights = run_relative_path(run_dir, cfg.agent_weights) if cfg.agent_weights else run_dir
+    ckpt = weights / "checkpoints" / (checkpoint or "last.pt")
     loaded = load_checkpoint_and_file(ckpt, required=("agent", "global_step"),
                                       fallback=not checkpoint)
     if loaded is None:
@@ -183,4 +197,14 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     agent.load_network_state(state["agent"], used)
     agent.eval()
     agent.checkpoint_file = used.name
+    if cfg.chooser not in PRIMITIVE_CHOOSERS:
+        raise InputError(f"{run_config_path(run_dir)}: chooser must be one of "
+                         f"{', '.join(PRIMITIVE_CHOOSERS)}, got {cfg.chooser!r}")
+    if cfg.chooser == "outcome_model":
+        from corn_drake.rl.outcome_chooser import OutcomeChooser
+        from corn_drake.rl.outcome_model import MODEL_FILE, load_outcome_model
+
+        model, saved = load_outcome_model(run_dir / MODEL_FILE)
+        agent.outcome_chooser = OutcomeChooser(model, saved["tokens"], saved)
+        agent.task = cfg.env.task
     return cfg, agent, int(state["global_step"])

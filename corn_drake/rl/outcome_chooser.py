@@ -1,0 +1,84 @@
+"""The contact-primitive policy's choice made by the outcome model (rl/outcome_model.py) instead
+of the critic: at every usable location the actor's motion and a fixed bank of uniform motions
+are candidates, and the candidate of highest predicted reward is the one chosen.
+
+A run folder chooses this way when its config's `chooser` is "outcome_model"; the model is its
+outcome_model.pt (rl/primitive_agent.load_primitive_run). The reward is predicted with the task
+and progress_reward the agent is evaluated under (PrimitiveAgent.task, .primitive_config), so
+`evaluate --task` and `--set primitive.*` reach the choice as they reach the env.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from corn_drake.rl.outcome_model import Candidates, model_inputs, predicted_rewards
+from corn_drake.transforms import from_pose9
+
+BANK = 32  # uniform motions tried at every location besides the actor's
+BANK_SEED = 0  # the bank is one fixed set: the same observation gets the same choice
+
+
+class OutcomeChooser:
+    def __init__(self, model, tokens: bool, facts: dict | None = None):
+        """`facts`: what the model file says of itself (its data, updates), for reports."""
+        self.model, self.tokens = model, bool(tokens)
+        self.facts = {k: v for k, v in (facts or {}).items()
+                      if isinstance(v, (int, float, str, bool, list))}
+        self.facts["bank_motions"] = BANK
+        self.bank = np.random.default_rng(BANK_SEED).uniform(-1.0, 1.0, (BANK, 3))
+
+    def candidates(self, agent, obs: dict):
+        """(Candidates, [(location, cloud point, motion)], which locations are usable (L,), every
+        location's cloud point (L,)) for one observation."""
+        from corn_drake.systems.low_push import push_contact
+
+        features, points = agent.features(obs)
+        with torch.no_grad():
+            actor = agent.actor(features)[0].numpy().astype(np.float64)
+        usable = features["mask"][0].numpy() > 0.5
+        p = np.asarray(obs["object_position"], np.float64)
+        keypoints = np.asarray(obs["object_keypoints"], np.float64).reshape(-1, 3) - p
+        goal_position, goal_rotation = from_pose9(np.asarray(obs["goal"], np.float64))
+        rows = []
+        # No usable location (every pre-contact point under the table): all of them, as the
+        # critic's choice then falls back to its argmax over all-masked scores.
+        for location in np.flatnonzero(usable) if usable.any() else range(len(usable)):
+            point = int(points[0, location])
+            aim = push_contact(obs["cloud"], obs["normals"], point, agent.primitive_config)[0] - p
+            normal = np.asarray(obs["normals"][point], np.float64)
+            for motion in np.vstack([actor[location][None], self.bank]):
+                rows.append((int(location), point, motion, aim, normal))
+        n = len(rows)
+        candidates = Candidates(
+            aim=np.stack([r[3] for r in rows]), normal=np.stack([r[4] for r in rows]),
+            motion=np.stack([r[2] for r in rows]), keypoints=np.repeat(keypoints[None], n, 0),
+            physics=np.repeat(np.asarray(obs["physics"], np.float64)[None], n, 0),
+            goal_rotation=np.repeat(goal_rotation[None], n, 0),
+            goal_position=np.repeat(goal_position[None], n, 0),
+            tokens=features["tokens"][0].numpy()[[r[0] for r in rows]])
+        return candidates, [(r[0], r[1], r[2]) for r in rows], usable, points[0].numpy()
+
+    def choose(self, agent, obs: dict, task) -> dict:
+        """PrimitiveAgent.choose's answer for one observation, chosen by predicted reward under
+        `task` (the env config's TaskConfig) and the agent's progress_reward. A location's
+        score is its best candidate's predicted reward; its motion, that candidate's."""
+        candidates, options, usable, points = self.candidates(agent, obs)
+        x, now, frames = model_inputs(candidates, self.tokens)
+        with torch.no_grad():
+            prediction = self.model(x, now)
+        scores = predicted_rewards(candidates, frames, prediction, task,
+                                   agent.primitive_config.progress_reward)
+        best = int(np.argmax(scores))
+        location, point, motion = options[best]
+        per_location = np.full(len(usable), -np.inf)
+        motions = np.zeros((len(usable), 3))
+        for (loc, _, m), score in zip(options, scores):
+            if score > per_location[loc]:
+                per_location[loc], motions[loc] = score, m
+        # Locations never scored (ruled out) show as the lowest score, as the critic's choice.
+        shown = np.where(np.isfinite(per_location), per_location,
+                         per_location[np.isfinite(per_location)].min())
+        return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
+                "scores": shown, "usable": usable, "candidates": points, "motions": motions}

@@ -1,0 +1,59 @@
+"""A primitive run folder that chooses by an outcome model (config `chooser: outcome_model`):
+what `docs/results/primitive/outcome_model.py fit --out-run` writes, and `evaluate`, `ship`
+and `gallery` read like any primitive run (rl/primitive_agent.load_primitive_run).
+
+It holds the proposing run's config (the task and settings it is evaluated under), its agent
+weights (the actor proposes one motion per location; the critic is unused) and the model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from corn_drake.rl.outcome_model import MODEL_FILE, save_outcome_model
+
+
+def outcome_run_config(run: Path, task: str | None, sets: list[str]):
+    """The proposing run's config with chooser outcome_model, its encoder named as this folder
+    reads it, `task`'s overlay and `sets` applied as `corn-drake evaluate` applies them."""
+    from corn_drake.config.bounds import check_bounds
+    from corn_drake.config.diagram_files import with_primitive_task
+    from corn_drake.config.overrides import apply_sets
+    from corn_drake.config.primitive import check_reward_points
+    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.rl.primitive_agent import load_primitive_run
+
+    base, _, _ = load_primitive_run(run)
+    cfg = with_primitive_task(base, task) if task is not None else base
+    cfg = apply_sets(cfg, sets, only=("env", "primitive"))
+    check_bounds(cfg.primitive, "primitive.")
+    check_reward_points(cfg.primitive)
+    cfg.check()
+    return dataclasses.replace(cfg, chooser="outcome_model",
+                               encoder=run_encoder_path(run, base.encoder))
+
+
+def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path) -> None:
+    """`out`: a primitive run folder that chooses by `model`: `cfg`, the proposing run's agent
+    weights (checkpoints/last.pt) and the model (outcome_model.pt). Built beside `out` and
+    renamed into place, so `out` is whole or absent."""
+    import shutil
+    import tempfile
+
+    from corn_drake.run_folders.config_file import write_run_config
+    from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
+
+    _, used = load_checkpoint_and_file(Path(run) / "checkpoints" / "last.pt", ("agent",))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    building.chmod(0o755)  # mkdtemp makes it private; a run folder is not
+    try:
+        (building / "checkpoints").mkdir()
+        shutil.copyfile(used, building / "checkpoints" / "last.pt")
+        save_outcome_model(building / MODEL_FILE, model, tokens, **facts)
+        write_run_config(cfg, building)
+        building.rename(out)
+    except BaseException:
+        shutil.rmtree(building, ignore_errors=True)
+        raise

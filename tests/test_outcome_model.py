@@ -1,0 +1,176 @@
+"""The outcome model (rl/outcome_model.py) and the choice made by it (rl/outcome_chooser.py): the
+reward it predicts for a known outcome is the env's own rule's, a fit learns a push's effect, the
+chooser's push frames come back to the world (a model that says "every push carries the object
+along it" pushes toward the goal), and bad model files are refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.errors import InputError, MissingInputError
+from corn_drake.rl.outcome_model import (SCALE, Candidates, OutcomeModel, data_after,
+                                         data_candidates, fit_model, load_outcome_model,
+                                         model_inputs, predicted_rewards, save_outcome_model)
+from corn_drake.systems.reward import keypoints_at, pose_errors, within_tolerance
+from corn_drake.transforms import pose9
+
+CORNERS = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.03, 0.03)
+                    for z in (-0.02, 0.02)])
+INPUTS = 38  # model_inputs without tokens: aim, normal, motion (9), 8 keypoints (24), physics (5)
+
+
+def _random_rotation(rng, tilt: float) -> np.ndarray:
+    """A yaw anywhere and a tilt of up to `tilt` rad about a horizontal axis."""
+    def about(axis, angle):
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    h = rng.uniform(0, 2 * np.pi)
+    return about(np.array([0.0, 0.0, 1.0]), rng.uniform(-np.pi, np.pi)) @ \
+        about(np.array([np.cos(h), np.sin(h), 0.0]), rng.uniform(0, tilt))
+
+
+def _rotation_vector(R: np.ndarray) -> np.ndarray:
+    angle = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))
+    if angle < 1e-9:
+        return np.zeros(3)
+    return angle / (2 * np.sin(angle)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0],
+                                                   R[1, 0] - R[0, 1]])
+
+
+def _model_saying(displacement_push: np.ndarray, rotation_push: np.ndarray) -> OutcomeModel:
+    """A model whose every prediction is this displacement and rotation (push frame, metres)."""
+    model = OutcomeModel(INPUTS)
+    with torch.no_grad():
+        model.net[-1].bias.copy_(torch.as_tensor(
+            np.concatenate([displacement_push * SCALE, rotation_push]), dtype=torch.float32))
+    return model.eval()
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_the_predicted_reward_of_a_known_outcome_is_the_envs_rule(case):
+    """A primitive that moves the object from (p0, R0) to (p1, R1): the reward predicted from
+    that exact motion equals progress x the closed keypoint distance plus the success reward,
+    both computed by systems/reward's own functions in the world frame."""
+    rng = np.random.default_rng(case)
+    task = load_primitive_env_config("full6d" if case % 2 else "push_turn").task
+    progress = 10.0
+    p0 = np.array([*rng.uniform(-0.1, 0.1, 2), 0.43])
+    R0 = _random_rotation(rng, 0.6)
+    turn = _random_rotation(rng, 0.3)
+    R1, p1 = turn @ R0, p0 + np.array([*rng.uniform(-0.06, 0.06, 2), rng.uniform(-0.02, 0.02)])
+    # Cases 0-1: the goal is where the primitive leaves the object (a success); others: elsewhere.
+    near = case < 2
+    Rg = R1 if near else _random_rotation(rng, 0.6)
+    pg = p1 + (np.array([0.01, -0.01, 0.0]) if near else np.array([*rng.uniform(-0.2, 0.2, 2),
+                                                                     0.0]))
+    motion = rng.uniform(-1, 1, (1, 3))
+    from corn_drake.rl.outcome_model import push_frames
+
+    F = push_frames(motion)[0]
+    d_world = (p1 - p0) * np.array([1.0, 1.0, 0.0])
+    model = _model_saying(F @ d_world, F @ _rotation_vector(turn))
+    c = Candidates(aim=np.zeros((1, 3)), normal=np.array([[1.0, 0, 0]]), motion=motion,
+                   keypoints=(CORNERS @ R0.T)[None], physics=np.ones((1, 5)),
+                   goal_rotation=(Rg @ R0.T)[None], goal_position=(pg - p0)[None],
+                   tokens=np.zeros((1, 4)))
+    x, now, frames = model_inputs(c, tokens=False)
+    with torch.no_grad():
+        predicted = predicted_rewards(c, frames, model(x, now), task, progress)[0]
+    goal_points = keypoints_at(CORNERS, pg, Rg)
+    before = np.linalg.norm(keypoints_at(CORNERS, p0, R0) - goal_points, axis=1).mean()
+    after = np.linalg.norm(keypoints_at(CORNERS, p1, R1) - goal_points, axis=1).mean()
+    success = within_tolerance(task, *pose_errors(p1, R1, pg, Rg))
+    assert success == near
+    assert predicted == pytest.approx(progress * (before - after) + task.success_reward * success,
+                                      abs=2e-5)
+
+
+def _synthetic_data(states: int, rng) -> dict:
+    """Collected-data arrays (rl/lookahead_distill's layout) of a world where every push moves
+    the object half the push's planar length along its heading and never turns it."""
+    per = 12
+    quats = np.tile([1.0, 0, 0, 0], (states, 1))
+    pose = np.concatenate([np.c_[rng.uniform(-0.1, 0.1, (states, 2)), np.full(states, 0.43)],
+                           quats], 1)
+    goal = pose.copy()
+    goal[:, :2] += 0.1
+    state = np.repeat(np.arange(states), per)
+    location = rng.integers(0, 16, len(state))
+    motion = rng.uniform(-1, 1, (len(state), 3)).astype(np.float32)
+    after = pose[state].copy()
+    after[:, :2] += 0.5 * 0.15 * motion[:, :2]
+    local = np.zeros((states, 16, 9), np.float32)
+    local[..., 6] = 1.0
+    return {"state": state, "location": location, "motion": motion,
+            "reward": np.zeros(len(state), np.float32),
+            "features_tokens": np.zeros((states, 16, 4), np.float32),
+            "features_local": local, "outcome_pose": pose, "outcome_goal": goal,
+            "outcome_corners": np.repeat(CORNERS[None], states, 0),
+            "outcome_aims": np.repeat(pose[:, None, :3], 16, 1),
+            "outcome_physics": np.ones((states, 5)),
+            "pose_after": after, "still_after": np.ones(len(state), bool),
+            "success_after": np.zeros(len(state), bool)}
+
+
+def test_a_fit_learns_how_far_a_push_carries_the_object():
+    rng = np.random.default_rng(0)
+    data = _synthetic_data(64, rng)
+    model = fit_model(data, tokens=False, updates=600, seed=0)
+    x, now, frames = model_inputs(data_candidates(data), tokens=False)
+    truth = data_after(data, frames)
+    with torch.no_grad():
+        predicted = model(x, now)[0]
+    error = (predicted - truth).norm(dim=2).mean()
+    still = (now - truth).norm(dim=2).mean()
+    assert error < 0.25 * still, (float(error), float(still))
+    with pytest.raises(ValueError, match="pose_after"):
+        fit_model({k: v for k, v in data.items() if k != "pose_after"}, False, 1, 0)
+
+
+def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
+    """The chooser's push frames back in the world: told that every push carries the object
+    5 cm along its own heading, it chooses a motion heading for the goal (5 cm away in +y)."""
+    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.primitive_agent import PrimitiveAgent
+    from corn_drake.rl.primitive_env import PrimitiveEnv
+
+    torch.manual_seed(0)
+    agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
+    cfg = load_primitive_env_config("push")
+    env = PrimitiveEnv(cfg, agent=agent)
+    obs, _ = env.reset(seed=1)
+    # The observation's goal is relative to the object: the position difference and
+    # R_goal R^T (systems/observations.py), here 5 cm along +y, unturned.
+    obs = {**obs, "goal": pose9(np.array([0.0, 0.05, 0.0]), np.eye(3)).astype(np.float32)}
+    agent.outcome_chooser = OutcomeChooser(_model_saying(np.array([0.05, 0, 0]), np.zeros(3)),
+                                           tokens=False)
+    agent.task = cfg.task
+    choice = agent.choose(obs)
+    heading = choice["motion"][:2] / np.linalg.norm(choice["motion"][:2])
+    assert heading @ np.array([0.0, 1.0]) > 0.9, choice["motion"]
+    # Its scores: each location's best candidate; the chosen location's is the highest.
+    assert choice["scores"][choice["location"]] == pytest.approx(choice["scores"].max())
+    assert choice["point"] == choice["candidates"][choice["location"]]
+
+
+def test_bad_model_files_are_refused_by_name(tmp_path):
+    missing = tmp_path / "outcome_model.pt"
+    with pytest.raises(MissingInputError, match="outcome_model.pt"):
+        load_outcome_model(missing)
+    missing.write_bytes(b"not a checkpoint")
+    with pytest.raises(InputError, match="outcome_model.pt"):
+        load_outcome_model(missing)
+    wrong = tmp_path / "wrong.pt"
+    model = OutcomeModel(INPUTS)
+    save_outcome_model(wrong, model, tokens=False, states=3)
+    loaded, facts = load_outcome_model(wrong)
+    assert facts["states"] == 3 and facts["inputs"] == INPUTS and facts["tokens"] is False
+    state = torch.load(wrong, weights_only=False)
+    state["inputs"] = INPUTS + 1
+    torch.save(state, wrong)
+    with pytest.raises(InputError, match="wrong.pt.*do not fit"):
+        load_outcome_model(wrong)
