@@ -203,13 +203,13 @@ def _save_weights(out: Path, state: dict) -> None:
         Path(tmp).write_bytes(_weights_bytes(state))
 
 
-def _identical_sibling_weights(content: bytes, out: Path) -> str | None:
-    """"../NAME" when a sibling of the weights folder `out` holds a checkpoints/last.pt of
-    exactly these bytes; None otherwise."""
-    for sibling in sorted(out.parent.glob("*/checkpoints/last.pt")):
-        folder = sibling.parent.parent
-        if folder.name != out.name and sibling.stat().st_size == len(content) and \
-                sibling.read_bytes() == content:
+def _identical_sibling(out: Path, name: str, content: bytes) -> str | None:
+    """"../FOLDER" of the first sibling folder of the weights folder `out` whose file `name`
+    (relative to that folder) holds exactly `content`; None when none does."""
+    for folder in sorted(p for p in out.resolve().parent.iterdir() if p.is_dir()):
+        candidate = folder / name
+        if folder.name != out.name and candidate.is_file() and \
+                candidate.stat().st_size == len(content) and candidate.read_bytes() == content:
             return f"../{folder.name}"
     return None
 
@@ -251,17 +251,6 @@ def _copy_encoder(cfg, out: Path) -> None:
     cfg.encoder = "encoder.pt"
 
 
-def _identical_sibling_encoder(encoder: str, out: Path) -> str | None:
-    """"../NAME/encoder.pt" when a sibling of the weights folder `out` holds an encoder.pt with
-    the same bytes as `encoder`; None otherwise."""
-    import filecmp
-
-    for sibling in sorted(out.resolve().parent.glob("*/encoder.pt")):
-        if sibling.parent.name != out.name and filecmp.cmp(sibling, encoder, shallow=False):
-            return f"../{sibling.parent.name}/encoder.pt"
-    return None
-
-
 def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a contact-primitive run's config, actor and critic and encoder into `out`; its
     card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
@@ -276,7 +265,7 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     _make_folder(out)
     # A run's config names its own copy, encoder.pt, relative to the run folder.
     cfg.encoder = run_encoder_path(run_dir, cfg.encoder)
-    shared = _identical_sibling_encoder(cfg.encoder, out)
+    shared = _identical_sibling(out, "encoder.pt", Path(cfg.encoder).read_bytes())
     if shared is None:
         _copy_encoder(cfg, out)
     else:
@@ -284,7 +273,7 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
         # read the shipped push_corn encoder): named there, not copied, so models/weights stays
         # within its size budget (tests/test_shipped_weights.py). evaluate resolves it relative
         # to this folder (rl/checkpoints.run_encoder_path).
-        cfg.encoder = shared
+        cfg.encoder = f"{shared}/encoder.pt"
     if cfg.env.scene.object.kind == "library":
         cfg.env.scene.object.library = library
     weights = {"agent": state["agent"], "global_step": state["global_step"]}
@@ -292,7 +281,8 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     if cfg.chooser == "outcome_model":
         # Its actor and critic are byte for byte those of the shipped folder that proposes its
         # motions: named there, not copied (models/weights' size budget), as the encoder.
-        cfg.agent_weights = _identical_sibling_weights(_weights_bytes(weights), out) or ""
+        cfg.agent_weights = _identical_sibling(out, "checkpoints/last.pt",
+                                               _weights_bytes(weights)) or ""
     write_run_config(cfg, out)
     if cfg.agent_weights:
         stale = out / "checkpoints" / "last.pt"  # a copy a previous ship of OUT left

@@ -16,14 +16,13 @@ def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
     """The encoder file a run's config names. `train` records --encoder as given (relative to
     where it ran); shipped weights (models/weights/, `corn-drake ship`) name theirs relative to
     their own folder, so a relative path that exists there is taken from there."""
-    if encoder and not Path(encoder).is_absolute() and (Path(run_dir) / encoder).is_file():
-        return str(Path(run_dir) / encoder)
-    return encoder
+    found = run_relative_path(run_dir, encoder) if encoder else None
+    return str(found) if found is not None and found != Path(encoder) else encoder  # as given
 
 
 def run_relative_path(run_dir: str | Path, name: str) -> Path:
-    """A folder a run's config names (PrimitiveTrainConfig.agent_weights): relative to the run
-    folder where it exists there, else as given."""
+    """A file or folder a run's config names (its encoder, PrimitiveTrainConfig.agent_weights):
+    relative to the run folder where it exists there, else as given."""
     if not Path(name).is_absolute() and (Path(run_dir) / name).exists():
         return Path(run_dir) / name
     return Path(name)
