@@ -273,6 +273,14 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
             assert (mine["seed"], mine["success"], mine["steps"]) == \
                 (theirs["seed"], theirs["success"], theirs["steps"])
 
+    # A shipped outcome folder (its actor and critic named, not held) proposes for a new one.
+    again_run = tmp_path / "runs" / "from_shipped"
+    write_outcome_run(beside, outcome_run_config(beside, None, []), model.eval(), False, {},
+                      again_run)
+    again_cfg, again_agent, _ = load_primitive_run(again_run)
+    assert again_cfg.agent_weights == "" and (again_run / "checkpoints" / "last.pt").is_file()
+    assert again_agent.outcome_chooser is not None
+
     capsys.readouterr()
     broken = tmp_path / "broken"
     shutil.copytree(outcome, broken)

@@ -30,7 +30,8 @@ def outcome_run_config(run: Path, task: str | None, sets: list[str]):
     check_bounds(cfg.primitive, "primitive.")
     check_reward_points(cfg.primitive)
     cfg.check()
-    return dataclasses.replace(cfg, chooser="outcome_model",
+    # The new folder holds its own copy of the actor and critic (write_outcome_run).
+    return dataclasses.replace(cfg, chooser="outcome_model", agent_weights="",
                                encoder=run_encoder_path(run, base.encoder))
 
 
@@ -41,10 +42,21 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
     import shutil
     import tempfile
 
-    from corn_drake.run_folders.config_file import write_run_config
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.primitive import PrimitiveTrainConfig
+    from corn_drake.errors import MissingInputError
+    from corn_drake.rl.checkpoints import run_relative_path
+    from corn_drake.run_folders.config_file import run_config_path, write_run_config
     from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
 
-    _, used = load_checkpoint_and_file(Path(run) / "checkpoints" / "last.pt", ("agent",))
+    # The proposing run's actor and critic: its own, or (a shipped outcome folder) those of the
+    # folder its agent_weights names.
+    named = load_config(PrimitiveTrainConfig, run_config_path(run)).agent_weights
+    checkpoint = (run_relative_path(run, named) if named else Path(run)) / "checkpoints" / "last.pt"
+    loaded = load_checkpoint_and_file(checkpoint, ("agent",))
+    if loaded is None:
+        raise MissingInputError(f"{run}: no actor and critic to propose motions ({checkpoint})")
+    used = loaded[1]
     out.parent.mkdir(parents=True, exist_ok=True)
     building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     building.chmod(0o755)  # mkdtemp makes it private; a run folder is not
