@@ -190,26 +190,18 @@ def run(args) -> int:
             # The file the weights came from: prev.pt when last.pt was unusable.
             extra = {"env_steps": env_steps,
                      "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
-        if args.task is not None and kind == "primitive":
-            from corn_drake.config.diagram_files import with_primitive_task
-
-            run_cfg = with_primitive_task(base, args.task)
-        else:
-            run_cfg = replace_task(base, args.task) if args.task is not None else base
-        # A primitive run's executor settings (its config's `primitive:`) are the policy's
-        # own, so --set reaches them too, e.g. primitive.success_at_rest=true.
-        run_cfg = apply_sets(run_cfg, args.set,
-                             only=("env", "primitive") if kind == "primitive" else "env")
-        if kind == "primitive" and run_cfg.primitive != base.primitive:
-            from corn_drake.config.bounds import check_bounds
-            from corn_drake.config.primitive import check_reward_points
-
-            check_bounds(run_cfg.primitive, "primitive.")
-            check_reward_points(run_cfg.primitive)
-            agent.primitive_config = run_cfg.primitive
         if kind == "primitive":
+            from corn_drake.config.diagram_files import primitive_run_on
+
+            # A primitive run's executor settings (its config's `primitive:`) are the policy's
+            # own, so --set reaches them too, e.g. primitive.success_at_rest=true.
+            run_cfg = primitive_run_on(base, args.task, args.set)
+            agent.primitive_config = run_cfg.primitive
             # An outcome-model chooser predicts the evaluated task's reward and success.
             agent.task = run_cfg.env.task
+        else:
+            run_cfg = replace_task(base, args.task) if args.task is not None else base
+            run_cfg = apply_sets(run_cfg, args.set, only="env")
         if kind == "primitive" and (args.attention or args.stochastic):
             # Refused before any env is built, in one line naming the flag.
             flag = "--attention" if args.attention else "--stochastic"

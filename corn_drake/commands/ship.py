@@ -255,13 +255,12 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     """Writes a contact-primitive run's config, actor and critic and encoder into `out`; its
     card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
     the replay files and the learner's targets and optimisers are for resuming a run."""
-    from corn_drake.rl.checkpoints import run_encoder_path, run_relative_path
+    from corn_drake.rl.checkpoints import agent_weights_folder, run_encoder_path
     from corn_drake.rl.primitive_agent import load_primitive_run
     from corn_drake.run_folders.config_file import write_run_config
 
     cfg, agent, _ = load_primitive_run(run_dir)  # the run must load as evaluate would load it
-    state = _weights(run_relative_path(run_dir, cfg.agent_weights) if cfg.agent_weights
-                     else run_dir, "agent")
+    state = _weights(agent_weights_folder(run_dir, cfg.agent_weights), "agent")
     _make_folder(out)
     # A run's config names its own copy, encoder.pt, relative to the run folder.
     cfg.encoder = run_encoder_path(run_dir, cfg.encoder)

@@ -94,3 +94,19 @@ def with_primitive_task(base, task: str):
     env = load_primitive_env_config(task)
     env.scene.object = base.env.scene.object
     return dc.replace(base, env=env)
+
+
+def primitive_run_on(base, task: str | None, sets):
+    """A primitive run's config as `evaluate` runs it: `task`'s overlay (None: its own task),
+    then the `--set` items (env.* and primitive.* only); a changed executor section is
+    range-checked (config/bounds.py) and its reward points checked."""
+    from corn_drake.config.bounds import check_bounds
+    from corn_drake.config.overrides import apply_sets
+    from corn_drake.config.primitive import check_reward_points
+
+    cfg = with_primitive_task(base, task) if task is not None else base
+    cfg = apply_sets(cfg, sets, only=("env", "primitive"))
+    if cfg.primitive != base.primitive:
+        check_bounds(cfg.primitive, "primitive.")
+        check_reward_points(cfg.primitive)
+    return cfg

@@ -28,6 +28,12 @@ def run_relative_path(run_dir: str | Path, name: str) -> Path:
     return Path(name)
 
 
+def agent_weights_folder(run_dir: str | Path, agent_weights: str) -> Path:
+    """The folder whose checkpoints/ hold a primitive run's actor and critic: the run's own, or
+    the one its config's agent_weights names (a shipped outcome-model folder's sibling)."""
+    return run_relative_path(run_dir, agent_weights) if agent_weights else Path(run_dir)
+
+
 def snapshot_path(run_dir: str | Path, step: int) -> Path:
     """Where a training run keeps its checkpoint of env step `step` (TrainConfig.snapshot_every)."""
     return Path(run_dir) / "checkpoints" / f"step_{step:09d}.pt"

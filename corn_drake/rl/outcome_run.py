@@ -17,18 +17,12 @@ from corn_drake.rl.outcome_model import MODEL_FILE, save_outcome_model
 def outcome_run_config(run: Path, task: str | None, sets: list[str]):
     """The proposing run's config with chooser outcome_model, its encoder named as this folder
     reads it, `task`'s overlay and `sets` applied as `corn-drake evaluate` applies them."""
-    from corn_drake.config.bounds import check_bounds
-    from corn_drake.config.diagram_files import with_primitive_task
-    from corn_drake.config.overrides import apply_sets
-    from corn_drake.config.primitive import check_reward_points
+    from corn_drake.config.diagram_files import primitive_run_on
     from corn_drake.rl.checkpoints import run_encoder_path
     from corn_drake.rl.primitive_agent import load_primitive_run
 
     base, _, _ = load_primitive_run(run)
-    cfg = with_primitive_task(base, task) if task is not None else base
-    cfg = apply_sets(cfg, sets, only=("env", "primitive"))
-    check_bounds(cfg.primitive, "primitive.")
-    check_reward_points(cfg.primitive)
+    cfg = primitive_run_on(base, task, sets)
     cfg.check()
     # The new folder holds its own copy of the actor and critic (write_outcome_run).
     return dataclasses.replace(cfg, chooser="outcome_model", agent_weights="",
@@ -45,14 +39,14 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
     from corn_drake.config.loader import load_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.errors import MissingInputError
-    from corn_drake.rl.checkpoints import run_relative_path
+    from corn_drake.rl.checkpoints import agent_weights_folder
     from corn_drake.run_folders.config_file import run_config_path, write_run_config
     from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
 
     # The proposing run's actor and critic: its own, or (a shipped outcome folder) those of the
     # folder its agent_weights names.
     named = load_config(PrimitiveTrainConfig, run_config_path(run)).agent_weights
-    checkpoint = (run_relative_path(run, named) if named else Path(run)) / "checkpoints" / "last.pt"
+    checkpoint = agent_weights_folder(run, named) / "checkpoints" / "last.pt"
     loaded = load_checkpoint_and_file(checkpoint, ("agent",))
     if loaded is None:
         raise MissingInputError(f"{run}: no actor and critic to propose motions ({checkpoint})")

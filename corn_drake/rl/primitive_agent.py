@@ -177,7 +177,7 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.config.choices import PRIMITIVE_CHOOSERS
     from corn_drake.errors import InputError, MissingInputError
-    from corn_drake.rl.checkpoints import run_encoder_path, run_relative_path
+    from corn_drake.rl.checkpoints import agent_weights_folder, run_encoder_path
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.run_folders.config_file import run_config_path
     from corn_drake.storage.checkpoint_files import load_checkpoint_and_file
@@ -185,8 +185,8 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     run_dir = Path(run_dir)
     cfg = load_config(PrimitiveTrainConfig, run_config_path(run_dir))
     # A shipped outcome-model folder reads a sibling folder's actor and critic (agent_weights).
-    weights = run_relative_path(run_dir, cfg.agent_weights) if cfg.agent_weights else run_dir
-    ckpt = weights / "checkpoints" / (checkpoint or "last.pt")
+    ckpt = agent_weights_folder(run_dir, cfg.agent_weights) / "checkpoints" / (
+        checkpoint or "last.pt")
     loaded = load_checkpoint_and_file(ckpt, required=("agent", "global_step"),
                                       fallback=not checkpoint)
     if loaded is None:

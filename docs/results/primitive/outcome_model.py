@@ -143,7 +143,12 @@ def main() -> None:
         parser.add_argument("--task", default=None, help="the run folder's task (as evaluate --task)")
         parser.add_argument("--set", action="append", default=[], dest="set",
                             help="env.* / primitive.* settings of the run folder (as evaluate's)")
-        fit(parser.parse_args(sys.argv[2:]))
+        from corn_drake.errors import InputError
+
+        try:
+            fit(parser.parse_args(sys.argv[2:]))
+        except InputError as error:  # a bad --run, --task or --set: one line, nothing written
+            raise SystemExit(f"outcome_model.py fit: {error}") from None
     else:
         raise SystemExit("usage: outcome_model.py study|fit ... (see the docstring)")
 
