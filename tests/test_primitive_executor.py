@@ -13,10 +13,15 @@ from pydrake.geometry import Meshcat
 from pydrake.math import RotationMatrix
 
 from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.primitive import PrimitiveConfig
+from corn_drake.config.scene import ControllerConfig
+from corn_drake.contract import ACTION_SLICES
 from corn_drake.errors import InputError
 from corn_drake.rl.env import DiagramEnv
 from corn_drake.rl.primitive_env import PrimitiveEnv
-from corn_drake.systems.primitive_executor import IDLE, PUSH, STATUS_LAYOUT, make_primitive
+from corn_drake.scene.objects import TABLE_TOP_Z
+from corn_drake.systems.primitive_executor import (IDLE, PUSH, RETREAT, SETTLE, STATUS_LAYOUT,
+                                                   PrimitivePlanner, make_primitive)
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 from corn_drake.viz.attention_view import viridis_rgb
 from corn_drake.viz.primitive_view import point_locations, primitive_path
@@ -156,6 +161,69 @@ def test_one_env_step_is_one_whole_primitive():
         np.testing.assert_allclose(obs["executor"], env.executor_status(), atol=1e-6)
 
 
+# ---------------------------------------------------------------------------------- settling
+
+def _planner_after_retreat(settle_steps: int):
+    """A planner and its memory at the end of a primitive's retreat (its last tick next)."""
+    planner = PrimitivePlanner(PrimitiveConfig(settle_steps=settle_steps), ControllerConfig())
+    memory = planner.initial_memory()
+    memory[0], memory[1] = RETREAT, planner.cfg.retreat_steps - 1  # _PHASE, _TICKS
+    return planner, memory
+
+
+def _tick(planner, memory, keypoints, tool=(0.5, 0.0, TABLE_TOP_Z + 0.2)):
+    offered = np.zeros(len(make_primitive(np.zeros(3), np.zeros(3), np.zeros(3), 0, 0)))
+    return planner.plan(memory, np.asarray(tool, float), RotationMatrix().matrix(), 0.2,
+                        lambda: offered, keypoints=keypoints)
+
+
+@pytest.mark.parametrize("drift, ticks", [(0.0, 1), (0.001, 1), (0.005, 5)])
+def test_the_hand_waits_for_the_object_to_settle_at_most_settle_steps(drift, ticks):
+    """After the retreat the hand holds still until the object's keypoints moved less than
+    settle_motion (2 mm) over a tick, or settle_steps (5) ticks have passed."""
+    planner, memory = _planner_after_retreat(5)
+    corners = np.random.default_rng(0).uniform(-0.05, 0.05, (8, 3))
+    memory, _ = _tick(planner, memory, corners)
+    assert memory[0] == SETTLE
+    for tick in range(1, 20):
+        memory, action = _tick(planner, memory, corners + drift * tick)
+        # The hand holds where it is.
+        np.testing.assert_allclose(action[ACTION_SLICES["position"]], 0.0, atol=1e-12)
+        if memory[0] == IDLE:
+            break
+    assert memory[0] == IDLE and tick == ticks
+
+
+def test_without_settle_steps_the_retreat_ends_idle_and_keypoints_are_not_needed():
+    planner, memory = _planner_after_retreat(0)
+    memory, _ = _tick(planner, memory, None)
+    assert memory[0] == IDLE
+    planner, memory = _planner_after_retreat(3)
+    with pytest.raises(ValueError, match="settle_steps needs the object's keypoints"):
+        _tick(planner, memory, None)
+
+
+@pytest.mark.parametrize("field, value", [("settle_steps", -1), ("settle_motion", 0.0)])
+def test_a_primitive_env_refuses_a_settle_setting_out_of_range_by_name(field, value):
+    with pytest.raises(InputError, match=f"primitive.{field} must be"):
+        PrimitiveEnv(_config("box"), PrimitiveConfig(**{field: value}))
+
+
+def test_a_settling_env_step_returns_with_the_object_still():
+    """A hard push sets a box sliding; with settle_steps the step returns only once it has
+    stopped (or the steps are spent), and takes longer than the same step without."""
+    results = {}
+    for settle in (0, 30):
+        env = PrimitiveEnv(_config("box"), PrimitiveConfig(settle_steps=settle))
+        obs, _ = env.reset(seed=0)
+        index = _side_point(env, obs)
+        _, _, _, _, info = env.step({"point": index, "motion": _inward(obs["normals"][index])})
+        results[settle] = (info["ticks"], env.object_still(), _status(env)["phase"])
+        assert results[settle][2] == IDLE
+    assert not results[0][1] and results[30][1], results  # sliding at the return, then still
+    assert results[30][0] > results[0][0], results
+
+
 # ----------------------------------------------------------------------------------- tipping
 
 def _tipped_goal_step(task: str, tip_penalty: float):
@@ -163,7 +231,6 @@ def _tipped_goal_step(task: str, tip_penalty: float):
     so the box, still on its own face, counts as tipped by the env's rule."""
     import dataclasses
 
-    from corn_drake.config.primitive import PrimitiveConfig
     from corn_drake.transforms import quat_wxyz_to_matrix
 
     env = PrimitiveEnv(load_primitive_env_config(task), PrimitiveConfig(tip_penalty=tip_penalty))
@@ -320,14 +387,18 @@ def _choosing_by_an_outcome_model(agent, task):
     return agent
 
 
-@pytest.mark.parametrize("locations, chooser", [("patch", "critic"), ("point", "critic"),
-                                                ("patch", "outcome_model")])
-def test_the_reported_location_is_the_policys_own_choice(locations, chooser):
+@pytest.mark.parametrize("locations, chooser, settle", [
+    ("patch", "critic", 0), ("point", "critic", 0), ("patch", "outcome_model", 0),
+    ("patch", "critic", 6)])
+def test_the_reported_location_is_the_policys_own_choice(locations, chooser, settle):
     agent = _agent(locations=locations)
     cfg = _config("box")
     if chooser == "outcome_model":
         agent = _choosing_by_an_outcome_model(agent, cfg.task)
-    env = PrimitiveEnv(cfg, agent=agent)
+    # Settling (a phase between the retreat and idle) must not shift the tick the next
+    # primitive is taken at away from the tick the policy records its choice.
+    agent.primitive_config = PrimitiveConfig(settle_steps=settle)
+    env = PrimitiveEnv(cfg, agent.primitive_config, agent=agent)
     obs, _ = env.reset(seed=3)
     first = agent.choose(obs)  # the first primitive is chosen at the episode's first tick
     policy = env.handles.policy

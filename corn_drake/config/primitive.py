@@ -45,7 +45,8 @@ class PrimitiveConfig:
               "progress_reward": ">= 0", "tip_penalty": ">= 0", "push_height": ">= 0",
               "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]",
               "turn_reward": ">= 0", "exit_penalty": ">= 0", "table_margin": ">= 0",
-              "rest_linear_speed": "> 0", "rest_angular_speed": "> 0"}
+              "rest_linear_speed": "> 0", "rest_angular_speed": "> 0",
+              "settle_steps": ">= 0", "settle_motion": "> 0"}
     # The tool point stops this far off the surface along the normal before the push. The
     # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
     pre_contact_distance: float = 0.04
@@ -73,6 +74,16 @@ class PrimitiveConfig:
     # Policy periods the approach (up, across, down) may take before the primitive is given up
     # as unreached (an obstacle, an unreachable point): then the tool only retreats.
     approach_steps: int = 20
+    # After the retreat the hand waits, holding still, until no box keypoint of the object has
+    # moved more than settle_motion (m) over the last policy period (2 mm per 0.1 s: the rest
+    # speed 0.02 m/s), for at most this many periods; then the next primitive may start. Why:
+    # the retreat lasts 0.2 s, and in 21 % of the states a primitive was chosen from, the
+    # object was still rolling or sliding (every candidate there moved it > 5 mm): the
+    # pre-contact point, taken from the cloud at the choice, was stale by the time the hand
+    # came down, and the outcome of what was chosen depended on motion no policy input shows
+    # (docs/results/primitive/, item 37). 0: no waiting (shipped cards replay as they were).
+    settle_steps: int = 0
+    settle_motion: float = 0.002
     # An episode ends after this many primitives (HACMan's 10), or at the task's episode_steps.
     max_primitives: int = 10
     # The executor's joint stiffness and damping ratio, normalised like the dense action's kp and

@@ -35,6 +35,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.config.diagram_files import load_teacher_config
 from corn_drake.config.primitive import PrimitiveConfig, at_rest, check_reward_points
 from corn_drake.config.teacher import TeacherDiagramConfig
@@ -88,6 +89,8 @@ class PrimitiveEnv(DiagramEnv):
             config = load_teacher_config(config)
         config.check()
         self.cfg, self.primitive_cfg = config, primitive or PrimitiveConfig()
+        # A PrimitiveConfig made in code is checked as a run's config is (its ranges too).
+        check_bounds(self.primitive_cfg, "primitive.")
         check_reward_points(self.primitive_cfg)
         self.handles = build_primitive_diagram(config, self.primitive_cfg, spec, meshcat, agent)
         super().__init__(self.handles.teacher, meshcat, agent_acts=True)

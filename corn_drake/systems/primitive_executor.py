@@ -18,7 +18,10 @@ input this system feeds in place of a PolicySystem):
             reach_tolerance starts the push; approach_steps ticks without reaching it give the
             primitive up (reported unreached) and go to retreat;
   push      the target moves from the pre-contact point by the motion in push_steps equal steps;
-  retreat   up by retreat_height over retreat_steps ticks; then idle (done).
+  retreat   up by retreat_height over retreat_steps ticks; then idle (done), or first
+  settle    (settle_steps > 0 only) hold the hand where it is until no box keypoint of the object
+            moved more than settle_motion over the last tick, at most settle_steps ticks: the
+            next primitive is chosen from an object at rest, not one still rolling.
 Each tick commands the tool toward the phase's target: a translation residual of at most the
 controller's max_position_delta (scaled as a whole, so the direction is kept), the rotation
 that points the fingers straight down and, for a side contact, turns the hand's narrow side
@@ -60,8 +63,8 @@ from corn_drake.timing import PolicyClock
 from corn_drake.transforms import from_pose9
 
 
-IDLE, APPROACH, DESCEND, PUSH, RETREAT = range(5)
-PHASES = ("idle", "approach", "descend", "push", "retreat")
+IDLE, APPROACH, DESCEND, PUSH, RETREAT, SETTLE = range(6)
+PHASES = ("idle", "approach", "descend", "push", "retreat", "settle")
 
 # Memory (discrete state) layout.
 _PHASE, _TICKS, _APPROACH_TICKS, _COUNT, _REACHED, _LOCATION = range(6)
@@ -72,7 +75,8 @@ _ANCHOR = slice(13, 16)  # where the retreat started
 _TARGET = slice(16, 19)  # the last commanded target
 _FACING = slice(19, 21)  # the contact normal's horizontal direction (zeros: a top contact)
 _LEAN = 21  # the fingers' lean toward the surface for this primitive (rad; facing_rotation)
-_MEMORY_SIZE = 22
+_KEYPOINTS = slice(22, 46)  # the object's box keypoints at the last tick (settle's motion)
+_MEMORY_SIZE = 46
 
 # The palm's lower edge (the finger knuckles) is this far above the tool point: an object whose
 # top is lower than that at the pre-contact point cannot meet the palm, and the fingers stay
@@ -204,11 +208,23 @@ class PrimitivePlanner:
         m[_PHASE], m[_TICKS] = phase, 0
 
     def plan(self, memory: np.ndarray, tool_p: np.ndarray, tool_R: np.ndarray, top_z: float,
-             primitive, object_xy=None) -> tuple[np.ndarray, np.ndarray]:
+             primitive, object_xy=None, keypoints=None) -> tuple[np.ndarray, np.ndarray]:
         """`primitive`: a callable giving the primitive input (evaluated only when idle);
-        `object_xy`: the object's centre (needed with keep_on_table)."""
+        `object_xy`: the object's centre (needed with keep_on_table); `keypoints`: the
+        object's 8 box keypoints, world frame (needed with settle_steps)."""
         cfg, m = self.cfg, np.array(memory, float)
         tol = cfg.reach_tolerance
+        if cfg.settle_steps and keypoints is None:
+            raise ValueError("primitive.settle_steps needs the object's keypoints")
+        # Settling ends after a tick over which the object hardly moved (judged here, against
+        # the keypoints stored at the last tick, and acted on at the tick's end like the
+        # fixed-length phases, so the next primitive starts at an idle tick, as displays and
+        # PrimitivePolicySystem's record expect).
+        still = m[_PHASE] == SETTLE and np.linalg.norm(
+            np.asarray(keypoints, float).reshape(-1, 3) - m[_KEYPOINTS].reshape(-1, 3),
+            axis=1).max() < cfg.settle_motion
+        if keypoints is not None:
+            m[_KEYPOINTS] = np.asarray(keypoints, float).reshape(-1)
         if m[_PHASE] == IDLE:
             offered = np.asarray(primitive(), float)
             if round(offered[PRIMITIVE_SEQUENCE]) == round(m[_COUNT]) + 1:
@@ -229,7 +245,7 @@ class PrimitivePlanner:
             self._enter(m, RETREAT)
         # The target of this tick.
         phase = int(m[_PHASE])
-        if phase == IDLE:
+        if phase in (IDLE, SETTLE):
             target = tool_p.copy()  # hold where the hand is
         elif phase == APPROACH:
             if tool_p[2] < m[_Z_SAFE] - tol:
@@ -248,15 +264,19 @@ class PrimitivePlanner:
         target[2] = max(target[2], TABLE_TOP_Z + cfg.min_tool_height)
         m[_TARGET] = target
         action = self._action(target, tool_p, tool_R,
-                              m[_FACING] if phase != IDLE else np.zeros(2), m[_LEAN])
+                              m[_FACING] if phase not in (IDLE, SETTLE) else np.zeros(2),
+                              m[_LEAN])
         # Count this tick; phases with a fixed length move on after their last command, so the
-        # memory after a primitive's last retreat tick already says idle (the env stops there).
+        # memory after a primitive's last retreat tick already says idle or settle (the env
+        # stops at idle).
         m[_TICKS] += 1
         if phase in (APPROACH, DESCEND):
             m[_APPROACH_TICKS] += 1
         if phase == PUSH and m[_TICKS] >= cfg.push_steps:
             self._enter(m, RETREAT)
         elif phase == RETREAT and m[_TICKS] >= cfg.retreat_steps:
+            self._enter(m, SETTLE if cfg.settle_steps else IDLE)
+        elif phase == SETTLE and (still or m[_TICKS] >= cfg.settle_steps):
             self._enter(m, IDLE)
         return m, action
 
@@ -329,7 +349,7 @@ class PrimitiveExecutor(LeafSystem):
         value.set_value(self.planner.plan(
             context.get_discrete_state(self._memory).value(), tool_p, tool_R,
             top_height(keypoints), lambda: self._primitive.Eval(context),
-            keypoints[:, :2].mean(axis=0)))
+            keypoints[:, :2].mean(axis=0), keypoints))
 
     def _update(self, context, discrete_state):
         discrete_state.set_value(self._memory, self._plan.Eval(context)[0])

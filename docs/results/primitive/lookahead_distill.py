@@ -41,7 +41,8 @@ COLLECT_SEED = 5000
 
 def collect(args) -> None:
     base, agent, _ = load_primitive_run(args.run)
-    primitive = dataclasses.replace(agent.primitive_config, success_at_rest=args.at_rest)
+    primitive = dataclasses.replace(agent.primitive_config, success_at_rest=args.at_rest,
+                                    settle_steps=args.settle_steps)
     ids = list_objects(args.objects, "train")
     args.out.mkdir(parents=True, exist_ok=True)
     envs, outcomes = {}, []
@@ -141,6 +142,9 @@ def main() -> None:
     c.add_argument("--random-motions", type=int, default=2)
     c.add_argument("--follow-policy", type=float, default=0.5)
     c.add_argument("--at-rest", action="store_true")
+    c.add_argument("--settle-steps", type=int, default=0,
+                   help="the executor waits up to this many periods after each primitive for "
+                        "the object to come to rest (PrimitiveConfig.settle_steps)")
     c.add_argument("--out", type=Path, required=True)
     f = sub.add_parser("fit")
     f.add_argument("run")

@@ -1,0 +1,178 @@
+"""Where the primitives' outcomes vary: README.md's item 37.
+
+    .venv/bin/python docs/results/primitive/outcome_sources.py runs/sources_plain \
+        runs/sources_settle10 --out docs/results/primitive/outcome_sources.json
+
+Each argument is a `lookahead_distill.py collect` folder (its states hold every candidate's
+outcome). Per folder:
+  moving_at_choice  the states at which every candidate moved the object more than 5 mm (mean
+                    box-keypoint distance): the object was still rolling or sliding when the
+                    primitive was chosen, whatever was chosen;
+  tilted            the candidates after which the object's up direction (the world's vertical
+                    in its own frame) turned by more than 20 degrees: it tipped or rolled;
+  tilted_share_of_squared_motion
+                    their part of the summed squared keypoint motion, what a model's squared
+                    error is measured against;
+  not_moved         the candidates that left the object within 5 mm of where it was.
+Motions are the reward's: the box keypoints with the origin's height dropped
+(rl/outcome_model.data_after).
+
+With --splits S, per folder and per split (--holdout-objects objects held out whole, the
+others fitted): the outcome model (rl/outcome_model.fit_model, --updates updates) and a
+classifier of `tilted` on the model's own inputs (a 2-layer MLP, logistic loss), each measured
+on the fitted objects and on the held-out ones: keypoint error against "no motion", and the
+classifier's ROC AUC. What a model of the primitives learns of the objects it saw against what
+carries over to others.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from distill_scaling import held_out_objects, select_states  # noqa: E402
+from lookahead_distill import load_data  # noqa: E402 - the collect folders' reader
+
+from corn_drake.rl.outcome_model import (BATCH_ROWS, OUTCOME_KEYS,  # noqa: E402
+                                         OUTCOME_ROW_KEYS, SCALE, data_after, data_candidates,
+                                         fit_model, model_inputs)
+from corn_drake.storage.atomic_files import write_json  # noqa: E402
+from corn_drake.transforms import quat_wxyz_to_matrix  # noqa: E402
+
+MOVED_M = 0.005
+TILT_DEG = 20.0
+
+
+def _up_turn_deg(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Degrees between the world's vertical seen in the object's frame before and after."""
+    up = [quat_wxyz_to_matrix(q)[2] for q in before]  # R^T e_z: the third row of R
+    up_after = [quat_wxyz_to_matrix(q)[2] for q in after]
+    cos = np.einsum("ri,ri->r", np.asarray(up), np.asarray(up_after))
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _motion_and_tilt(data: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(each candidate's mean keypoint motion (m), whether it tilted the object)."""
+    _, now, frames = model_inputs(data_candidates(data), tokens=False)
+    motion = np.linalg.norm(data_after(data, frames).numpy() - now.numpy(), axis=2).mean(1) / SCALE
+    tilted = _up_turn_deg(data["outcome_pose"][data["state"], 3:],
+                          data["pose_after"][:, 3:]) > TILT_DEG
+    return motion, tilted
+
+
+def sources(data: dict) -> dict:
+    """The figures of one folder's data (see the module docstring)."""
+    motion, tilted = _motion_and_tilt(data)
+    state = data["state"]
+    least = np.full(int(state.max()) + 1, np.inf)
+    np.minimum.at(least, state, motion)
+    return {"states": int(len(least)), "candidates": int(len(motion)),
+            "objects": int(len(set(data["object"]))) if "object" in data else None,
+            "moving_at_choice": float(np.mean(least > MOVED_M)),
+            "tilted": float(tilted.mean()),
+            "tilted_share_of_squared_motion": float((motion[tilted] ** 2).sum() /
+                                                    (motion ** 2).sum()),
+            "not_moved": float(np.mean(motion <= MOVED_M)),
+            "mean_keypoint_motion_m": float(motion.mean()),
+            "still_after": float(np.mean(data["still_after"]))}
+
+
+def roc_auc(label: np.ndarray, score: np.ndarray) -> float:
+    """The probability that a random positive scores above a random negative (ties: half)."""
+    label = np.asarray(label, bool)
+    positive, negative = score[label], score[~label]
+    if not len(positive) or not len(negative):
+        return float("nan")
+    above = (positive[:, None] > negative[None]).mean() + \
+        0.5 * (positive[:, None] == negative[None]).mean()
+    return float(above)
+
+
+def fit_tilt_classifier(x: torch.Tensor, tilted: np.ndarray, updates: int, seed: int):
+    """A 2-layer MLP (128 wide) giving a logit of `tilted` from the model's inputs `x`."""
+    torch.manual_seed(seed)
+    net = nn.Sequential(nn.Linear(x.shape[1], 128), nn.ReLU(), nn.Linear(128, 128), nn.ReLU(),
+                        nn.Linear(128, 1))
+    optimiser = torch.optim.Adam(net.parameters(), lr=1e-3)
+    y = torch.as_tensor(tilted, dtype=torch.float32)
+    for _ in range(updates):
+        batch = torch.randint(len(x), (BATCH_ROWS,))
+        loss = nn.functional.binary_cross_entropy_with_logits(net(x[batch])[:, 0], y[batch])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    return net.eval()
+
+
+def _measured(model, classifier, data: dict) -> dict:
+    x, now, frames = model_inputs(data_candidates(data), tokens=False)
+    truth = data_after(data, frames).numpy()
+    with torch.no_grad():
+        after = model(x, now)[0].numpy()
+        logits = classifier(x)[:, 0].numpy()
+    _, tilted = _motion_and_tilt(data)
+    return {"keypoint_error_m": float(np.linalg.norm(after - truth, axis=2).mean() / SCALE),
+            "no_motion_error_m": float(np.linalg.norm(now.numpy() - truth, axis=2).mean()
+                                       / SCALE),
+            "tilt_auc": roc_auc(tilted, logits)}
+
+
+def cross_object_fits(data: dict, holdout: int, splits: int, updates: int) -> list[dict]:
+    """Per split: the model and the classifier fitted on all but `holdout` objects, measured on
+    the fitted ones and the held-out ones."""
+    objects = sorted(set(data["object"]))
+    if holdout >= len(objects):
+        raise SystemExit(f"--holdout-objects {holdout}: the data have only {len(objects)} "
+                         "objects")
+    out = []
+    for split in range(splits):
+        held, _ = held_out_objects(objects, holdout, split)
+        inside = np.isin(data["object"], held)
+        train = select_states(data, np.flatnonzero(~inside))
+        held_out = select_states(data, np.flatnonzero(inside))
+        model = fit_model(train, tokens=False, updates=updates, seed=split)
+        x, _, _ = model_inputs(data_candidates(train), tokens=False)
+        classifier = fit_tilt_classifier(x, _motion_and_tilt(train)[1], updates, split)
+        out.append({"split": split, "train_objects": len(objects) - holdout,
+                    "fitted": _measured(model, classifier, train),
+                    "held_out": _measured(model, classifier, held_out)})
+        print(f"  split {split}: {out[-1]}", flush=True)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("folders", type=Path, nargs="+")
+    parser.add_argument("--splits", type=int, default=0,
+                        help="object splits for the cross-object fits (0: none)")
+    parser.add_argument("--holdout-objects", type=int, default=6)
+    parser.add_argument("--updates", type=int, default=4000)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    report = {"moved_m": MOVED_M, "tilt_deg": TILT_DEG, "splits": args.splits,
+              "holdout_objects": args.holdout_objects, "updates": args.updates, "folders": {}}
+    for folder in args.folders:
+        files = sorted(folder.glob("episodes_*.npz"))
+        data = load_data(files) if files else {}
+        missing = [k for k in OUTCOME_KEYS + OUTCOME_ROW_KEYS if k not in data]
+        if missing:
+            raise SystemExit(f"{folder}: no episodes_*.npz files, or files without "
+                             f"{', '.join(missing)} (collected before outcomes were stored)")
+        report["folders"][str(folder)] = figures = sources(data)
+        print(folder, {k: round(v, 3) if isinstance(v, float) else v
+                       for k, v in figures.items()}, flush=True)
+        if args.splits:
+            figures["cross_object_fits"] = cross_object_fits(data, args.holdout_objects,
+                                                             args.splits, args.updates)
+    write_json(args.out, report)
+
+
+if __name__ == "__main__":
+    main()
