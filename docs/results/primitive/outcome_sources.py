@@ -18,11 +18,16 @@ Motions are the reward's: the box keypoints with the origin's height dropped
 (rl/outcome_model.data_after).
 
 With --splits S, per folder and per split (--holdout-objects objects held out whole, the
-others fitted): the outcome model (rl/outcome_model.fit_model, --updates updates) and a
-classifier of `tilted` on the model's own inputs (a 2-layer MLP, logistic loss), each measured
-on the fitted objects and on the held-out ones: keypoint error against "no motion", and the
-classifier's ROC AUC. What a model of the primitives learns of the objects it saw against what
-carries over to others.
+first --object-fractions of the others fitted): the outcome model (rl/outcome_model.fit_model,
+--updates updates) and a classifier of `tilted` on the model's own inputs (a 2-layer MLP,
+logistic loss; and the same classifier on 18 box-and-contact features instead: the aim's
+height over the box's bottom as a fraction of its height, the box's height, length and width
+along and across the push, its height over its length, the aim's offset from the box's centre
+along and across the push in half-lengths, the normal and motion in the push's frame, the push
+depth and the physics), each measured on the fitted objects and on the held-out ones: keypoint
+error against "no motion", and the classifiers' ROC AUC. What a model of the primitives learns of
+the objects it saw against what carries over to others, and how that grows with the number of
+objects it saw.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from lookahead_distill import load_data  # noqa: E402 - the collect folders' rea
 
 from corn_drake.rl.outcome_model import (BATCH_ROWS, OUTCOME_KEYS,  # noqa: E402
                                          OUTCOME_ROW_KEYS, SCALE, data_after, data_candidates,
-                                         fit_model, model_inputs)
+                                         fit_model, model_inputs, push_frames)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 from corn_drake.transforms import quat_wxyz_to_matrix  # noqa: E402
 
@@ -83,6 +88,28 @@ def sources(data: dict) -> dict:
             "still_after": float(np.mean(data["still_after"]))}
 
 
+def box_contact_features(data: dict) -> torch.Tensor:
+    """(R, 18) the box-and-contact features of every candidate (module docstring), in the
+    push's frame; lengths in decimetres."""
+    c = data_candidates(data)
+    frames = push_frames(c.motion)
+
+    def turn(v):
+        return np.einsum("rij,r...j->r...i", frames, v)
+
+    corners, aim, normal, motion = turn(c.keypoints), turn(c.aim), turn(c.normal), turn(c.motion)
+    low, high = corners.min(1), corners.max(1)
+    size, centre = high - low, (high + low) / 2
+    length, width, height = size[:, 0], size[:, 1], size[:, 2]
+    features = [(aim[:, 2] - low[:, 2]) / height, height * SCALE, length * SCALE,
+                width * SCALE, height / length, (aim[:, 0] - centre[:, 0]) / (length / 2),
+                (aim[:, 1] - centre[:, 1]) / (width / 2), *normal.T,
+                np.linalg.norm(motion[:, :2], axis=1), motion[:, 2],
+                -(c.motion * c.normal).sum(1)]
+    return torch.as_tensor(np.concatenate([np.stack(features, 1), c.physics], 1),
+                           dtype=torch.float32)
+
+
 def roc_auc(label: np.ndarray, score: np.ndarray) -> float:
     """The probability that a random positive scores above a random negative (ties: half)."""
     label = np.asarray(label, bool)
@@ -95,54 +122,67 @@ def roc_auc(label: np.ndarray, score: np.ndarray) -> float:
 
 
 def fit_tilt_classifier(x: torch.Tensor, tilted: np.ndarray, updates: int, seed: int):
-    """A 2-layer MLP (128 wide) giving a logit of `tilted` from the model's inputs `x`."""
+    """A 2-layer MLP (128 wide) giving a logit of `tilted` from inputs `x` (standardised by
+    their mean and deviation over the fitted rows)."""
     torch.manual_seed(seed)
+    mean, deviation = x.mean(0), x.std(0) + 1e-6
     net = nn.Sequential(nn.Linear(x.shape[1], 128), nn.ReLU(), nn.Linear(128, 128), nn.ReLU(),
                         nn.Linear(128, 1))
     optimiser = torch.optim.Adam(net.parameters(), lr=1e-3)
     y = torch.as_tensor(tilted, dtype=torch.float32)
     for _ in range(updates):
         batch = torch.randint(len(x), (BATCH_ROWS,))
-        loss = nn.functional.binary_cross_entropy_with_logits(net(x[batch])[:, 0], y[batch])
+        loss = nn.functional.binary_cross_entropy_with_logits(
+            net((x[batch] - mean) / deviation)[:, 0], y[batch])
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-    return net.eval()
+    net.eval()
+    return lambda inputs: net((inputs - mean) / deviation)[:, 0]
 
 
-def _measured(model, classifier, data: dict) -> dict:
+def _measured(model, classifiers, data: dict) -> dict:
+    """`classifiers`: (on the model's inputs, on the box-and-contact features)."""
     x, now, frames = model_inputs(data_candidates(data), tokens=False)
     truth = data_after(data, frames).numpy()
     with torch.no_grad():
         after = model(x, now)[0].numpy()
-        logits = classifier(x)[:, 0].numpy()
+        logits = classifiers[0](x).numpy()
+        box_logits = classifiers[1](box_contact_features(data)).numpy()
     _, tilted = _motion_and_tilt(data)
     return {"keypoint_error_m": float(np.linalg.norm(after - truth, axis=2).mean() / SCALE),
             "no_motion_error_m": float(np.linalg.norm(now.numpy() - truth, axis=2).mean()
                                        / SCALE),
-            "tilt_auc": roc_auc(tilted, logits)}
+            "tilt_auc": roc_auc(tilted, logits),
+            "tilt_auc_box_contact_features": roc_auc(tilted, box_logits)}
 
 
-def cross_object_fits(data: dict, holdout: int, splits: int, updates: int) -> list[dict]:
-    """Per split: the model and the classifier fitted on all but `holdout` objects, measured on
-    the fitted ones and the held-out ones."""
+def cross_object_fits(data: dict, holdout: int, splits: int, updates: int,
+                      fractions: list[float]) -> list[dict]:
+    """Per split and fraction: the model and the classifier fitted on that fraction of the
+    objects not held out (`holdout` of them, the same for every fraction of a split), measured
+    on the fitted ones and the held-out ones."""
     objects = sorted(set(data["object"]))
     if holdout >= len(objects):
         raise SystemExit(f"--holdout-objects {holdout}: the data have only {len(objects)} "
                          "objects")
     out = []
     for split in range(splits):
-        held, _ = held_out_objects(objects, holdout, split)
-        inside = np.isin(data["object"], held)
-        train = select_states(data, np.flatnonzero(~inside))
-        held_out = select_states(data, np.flatnonzero(inside))
-        model = fit_model(train, tokens=False, updates=updates, seed=split)
-        x, _, _ = model_inputs(data_candidates(train), tokens=False)
-        classifier = fit_tilt_classifier(x, _motion_and_tilt(train)[1], updates, split)
-        out.append({"split": split, "train_objects": len(objects) - holdout,
-                    "fitted": _measured(model, classifier, train),
-                    "held_out": _measured(model, classifier, held_out)})
-        print(f"  split {split}: {out[-1]}", flush=True)
+        held, rest = held_out_objects(objects, holdout, split)
+        held_out = select_states(data, np.flatnonzero(np.isin(data["object"], held)))
+        for fraction in fractions:
+            used = rest[:max(1, round(fraction * len(rest)))]
+            train = select_states(data, np.flatnonzero(np.isin(data["object"], used)))
+            model = fit_model(train, tokens=False, updates=updates, seed=split)
+            x, _, _ = model_inputs(data_candidates(train), tokens=False)
+            tilted = _motion_and_tilt(train)[1]
+            classifiers = (fit_tilt_classifier(x, tilted, updates, split),
+                           fit_tilt_classifier(box_contact_features(train), tilted, updates,
+                                               split))
+            out.append({"split": split, "train_objects": len(used),
+                        "fitted": _measured(model, classifiers, train),
+                        "held_out": _measured(model, classifiers, held_out)})
+            print(f"  split {split}: {out[-1]}", flush=True)
     return out
 
 
@@ -153,11 +193,17 @@ def main() -> None:
                         help="object splits for the cross-object fits (0: none)")
     parser.add_argument("--holdout-objects", type=int, default=6)
     parser.add_argument("--updates", type=int, default=4000)
+    parser.add_argument("--object-fractions", type=float, nargs="+", default=[1.0],
+                        help="fit on these fractions of the objects not held out")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
+    bad = [f for f in args.object_fractions if not 0.0 < f <= 1.0]
+    if bad:
+        raise SystemExit(f"--object-fractions must be in (0, 1], got {bad[0]}")
     torch.set_num_threads(1)
     report = {"moved_m": MOVED_M, "tilt_deg": TILT_DEG, "splits": args.splits,
-              "holdout_objects": args.holdout_objects, "updates": args.updates, "folders": {}}
+              "holdout_objects": args.holdout_objects, "updates": args.updates,
+              "object_fractions": args.object_fractions, "folders": {}}
     for folder in args.folders:
         files = sorted(folder.glob("episodes_*.npz"))
         data = load_data(files) if files else {}
@@ -169,8 +215,8 @@ def main() -> None:
         print(folder, {k: round(v, 3) if isinstance(v, float) else v
                        for k, v in figures.items()}, flush=True)
         if args.splits:
-            figures["cross_object_fits"] = cross_object_fits(data, args.holdout_objects,
-                                                             args.splits, args.updates)
+            figures["cross_object_fits"] = cross_object_fits(
+                data, args.holdout_objects, args.splits, args.updates, args.object_fractions)
     write_json(args.out, report)
 
 
