@@ -1,7 +1,7 @@
 """Where the primitives' outcomes vary: README.md's item 37.
 
     .venv/bin/python docs/results/primitive/outcome_sources.py runs/sources_plain \
-        runs/sources_settle10 --out docs/results/primitive/outcome_sources.json
+        runs/sources_settle10 --splits 3 --out docs/results/primitive/outcome_sources.json
 
 Each argument is a `lookahead_distill.py collect` folder (its states hold every candidate's
 outcome). Per folder:
@@ -62,18 +62,17 @@ def _up_turn_deg(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def _motion_and_tilt(data: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(each candidate's mean keypoint motion (m), whether it tilted the object)."""
-    _, now, frames = model_inputs(data_candidates(data), tokens=False)
-    motion = np.linalg.norm(data_after(data, frames).numpy() - now.numpy(), axis=2).mean(1) / SCALE
-    tilted = _up_turn_deg(data["outcome_pose"][data["state"], 3:],
-                          data["pose_after"][:, 3:]) > TILT_DEG
-    return motion, tilted
+def _tilted(data: dict) -> np.ndarray:
+    """Whether each candidate tilted the object (turned its up direction past TILT_DEG)."""
+    return _up_turn_deg(data["outcome_pose"][data["state"], 3:],
+                        data["pose_after"][:, 3:]) > TILT_DEG
 
 
 def sources(data: dict) -> dict:
     """The figures of one folder's data (see the module docstring)."""
-    motion, tilted = _motion_and_tilt(data)
+    _, now, frames = model_inputs(data_candidates(data), tokens=False)
+    motion = np.linalg.norm(data_after(data, frames).numpy() - now.numpy(), axis=2).mean(1) / SCALE
+    tilted = _tilted(data)
     state = data["state"]
     least = np.full(int(state.max()) + 1, np.inf)
     np.minimum.at(least, state, motion)
@@ -149,7 +148,7 @@ def _measured(model, classifiers, data: dict) -> dict:
         after = model(x, now)[0].numpy()
         logits = classifiers[0](x).numpy()
         box_logits = classifiers[1](box_contact_features(data)).numpy()
-    _, tilted = _motion_and_tilt(data)
+    tilted = _tilted(data)
     return {"keypoint_error_m": float(np.linalg.norm(after - truth, axis=2).mean() / SCALE),
             "no_motion_error_m": float(np.linalg.norm(now.numpy() - truth, axis=2).mean()
                                        / SCALE),
@@ -175,7 +174,7 @@ def cross_object_fits(data: dict, holdout: int, splits: int, updates: int,
             train = select_states(data, np.flatnonzero(np.isin(data["object"], used)))
             model = fit_model(train, tokens=False, updates=updates, seed=split)
             x, _, _ = model_inputs(data_candidates(train), tokens=False)
-            tilted = _motion_and_tilt(train)[1]
+            tilted = _tilted(train)
             classifiers = (fit_tilt_classifier(x, tilted, updates, split),
                            fit_tilt_classifier(box_contact_features(train), tilted, updates,
                                                split))
