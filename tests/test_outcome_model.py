@@ -11,9 +11,10 @@ import torch
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError, MissingInputError
+from corn_drake.rl.outcome_file import load_outcome_model, save_outcome_model
 from corn_drake.rl.outcome_model import (SCALE, Candidates, OutcomeModel, data_after,
-                                         data_candidates, fit_model, load_outcome_model,
-                                         model_inputs, predicted_rewards, save_outcome_model)
+                                         data_candidates, fit_model, model_inputs,
+                                         predicted_rewards)
 from corn_drake.systems.reward import keypoints_at, pose_errors, within_tolerance
 from corn_drake.transforms import pose9
 
@@ -174,3 +175,130 @@ def test_bad_model_files_are_refused_by_name(tmp_path):
     torch.save(state, wrong)
     with pytest.raises(InputError, match="wrong.pt.*do not fit"):
         load_outcome_model(wrong)
+
+
+# --- ensembles, pessimism and the tilt veto (item 38) ------------------------------------------
+class _TableModel(torch.nn.Module):
+    """Stands in for an OutcomeModel in the chooser's arithmetic: candidate i's planar
+    displacement is row i of a table (push frame, metres), never a turn."""
+
+    def __init__(self, displacements):
+        super().__init__()
+        self.table = torch.as_tensor(np.asarray(displacements) * SCALE, dtype=torch.float32)
+
+    def forward(self, x, now):
+        moved = self.table * torch.tensor([1.0, 1.0, 0.0])
+        return now + moved[:, None], moved, torch.zeros(len(moved), 3)
+
+
+def _pushes_along_x(aim_heights, goal_x: float = 0.3) -> Candidates:
+    """Candidates pushing the CORNERS box along +x (their push frame is the world's) from its
+    -x face at these heights over its origin, toward a goal goal_x along +x, unturned."""
+    n = len(aim_heights)
+    return Candidates(aim=np.c_[np.full(n, -0.05), np.zeros(n), aim_heights],
+                      normal=np.tile([-1.0, 0.0, 0.0], (n, 1)),
+                      motion=np.tile([1.0, 0.0, 0.0], (n, 1)),
+                      keypoints=np.repeat(CORNERS[None], n, 0), physics=np.ones((n, 5)),
+                      goal_rotation=np.repeat(np.eye(3)[None], n, 0),
+                      goal_position=np.tile([goal_x, 0.0, 0.0], (n, 1)),
+                      tokens=np.zeros((n, 4)))
+
+
+def test_pessimism_prefers_the_candidate_the_members_agree_on():
+    """Candidate 0: one member says it carries the box 10 cm toward the goal, the other 3 cm
+    away; candidate 1: both say 3 cm toward. The mean takes the promise (0.35 > 0.30 of
+    progress), one deviation of pessimism the agreement; one model scores as before."""
+    from corn_drake.config.primitive import OutcomeChoiceConfig
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+
+    task, progress = load_primitive_env_config("push").task, 10.0
+    c = _pushes_along_x([0.0, 0.0])
+    members = [_TableModel([[0.10, 0, 0], [0.03, 0, 0]]),
+               _TableModel([[-0.03, 0, 0], [0.03, 0, 0]])]
+    x, now, frames = model_inputs(c, tokens=False)
+    rewards = np.stack([predicted_rewards(c, frames, m(x, now), task, progress)
+                        for m in members], 1)
+    assert rewards[:, 1] == pytest.approx([-0.3, 0.3], abs=1e-5)  # progress x the closed metres
+    chooser = OutcomeChooser(members, tokens=False)
+    assert np.array_equal(chooser.scores(c, task, progress), rewards.mean(1))
+    assert np.argmax(chooser.scores(c, task, progress)) == 0
+    chooser.use(OutcomeChoiceConfig(pessimism=1.0))
+    assert chooser.scores(c, task, progress) == pytest.approx(rewards.mean(1) - rewards.std(1))
+    assert np.argmax(chooser.scores(c, task, progress)) == 1
+    assert chooser.facts["pessimism"] == 1.0
+    single = OutcomeChooser(members[0], tokens=False)
+    assert np.array_equal(single.scores(c, task, progress), rewards[:, 0])  # bit for bit
+    with pytest.raises(InputError, match=r"outcome.pessimism 1 needs an ensemble"):
+        single.use(OutcomeChoiceConfig(pessimism=1.0))
+    with pytest.raises(InputError, match=r"outcome.tilt_veto 0.5 needs a tilt classifier"):
+        single.use(OutcomeChoiceConfig(tilt_veto=0.5))
+
+
+def test_a_fitted_tilt_classifier_vetoes_the_pushes_it_expects_to_tip():
+    """Labels "pushed above 5 mm over the box's middle tips it": the classifier fitted to them
+    separates the two, and the veto then passes over a high push the model prefers, unless
+    every candidate is high."""
+    from corn_drake.config.primitive import OutcomeChoiceConfig
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.tilt_classifier import box_contact_features, fit_tilt_classifier
+
+    heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
+    c = _pushes_along_x(heights)
+    tilted = heights > 0.005
+    classifier = fit_tilt_classifier(box_contact_features(c), tilted, 600, seed=0)
+    p = classifier.probability(c)
+    assert (p[tilted] > 0.5).mean() > 0.9 and (p[~tilted] < 0.5).mean() > 0.9
+    task = load_primitive_env_config("push").task
+    model = _TableModel([[0.10, 0, 0], [0.03, 0, 0]])
+    chooser = OutcomeChooser([model], tokens=False, tilt=classifier)
+    high_low = _pushes_along_x([0.018, -0.018])
+    assert np.argmax(chooser.scores(high_low, task, 10.0)) == 0
+    chooser.use(OutcomeChoiceConfig(tilt_veto=0.5))
+    scores = chooser.scores(high_low, task, 10.0)
+    assert np.argmax(scores) == 1 and scores[0] == -np.inf
+    both_high = chooser.scores(_pushes_along_x([0.018, 0.015]), task, 10.0)
+    assert np.isfinite(both_high).all() and np.argmax(both_high) == 0
+    with pytest.raises(ValueError, match="400 feature rows for 3 labels"):
+        fit_tilt_classifier(box_contact_features(c), tilted[:3], 1, seed=0)
+
+
+def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
+    from corn_drake.rl.outcome_file import load_outcome_parts
+    from corn_drake.rl.tilt_classifier import TiltClassifier
+
+    torch.manual_seed(0)
+    models = [OutcomeModel(INPUTS) for _ in range(3)]
+    for m in models:
+        torch.nn.init.normal_(m.net[-1].weight, std=0.1)
+    tilt = TiltClassifier(18)
+    tilt.mean.uniform_()
+    path = tmp_path / "ensemble.pt"
+    save_outcome_model(path, models[0], False, models[1:], tilt, states=5)
+    parts = load_outcome_parts(path)
+    assert len(parts.models) == 3 and parts.facts["members"] == 3 and parts.facts["states"] == 5
+    x = torch.randn(4, INPUTS)
+    now = torch.randn(4, 8, 3)
+    with torch.no_grad():
+        for mine, theirs in zip(parts.models, models):
+            assert torch.equal(mine(x, now)[0], theirs(x, now)[0])
+        features = torch.randn(4, 18)
+        assert torch.equal(parts.tilt(features), tilt.eval()(features))
+    # A file written before ensembles (one model, no tilt classifier) loads as one model.
+    state = torch.load(path, weights_only=False)
+    for key in ("members", "tilt", "tilt_inputs"):
+        del state[key]
+    torch.save(state, path)
+    parts = load_outcome_parts(path)
+    assert len(parts.models) == 1 and parts.tilt is None and parts.facts["members"] == 1
+
+
+def test_the_outcome_choice_settings_are_range_checked_where_evaluate_applies_them():
+    from corn_drake.config.diagram_files import primitive_run_on
+    from corn_drake.config.primitive import PrimitiveTrainConfig
+
+    base = PrimitiveTrainConfig()
+    cfg = primitive_run_on(base, None, ["outcome.pessimism=2", "outcome.tilt_veto=0.3"])
+    assert (cfg.outcome.pessimism, cfg.outcome.tilt_veto) == (2.0, 0.3)
+    for bad in ("outcome.tilt_veto=0", "outcome.tilt_veto=1.5", "outcome.pessimism=-1"):
+        with pytest.raises(InputError, match=bad.split("=")[0]):
+            primitive_run_on(base, None, [bad])

@@ -281,6 +281,24 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
     assert again_cfg.agent_weights == "" and (again_run / "checkpoints" / "last.pt").is_file()
     assert again_agent.outcome_chooser is not None
 
+    # An ensemble with a tilt classifier chooses as evaluate's --set outcome.* says; a single
+    # model refuses pessimism in one line.
+    from corn_drake.rl.tilt_classifier import TiltClassifier
+
+    ensemble = tmp_path / "runs" / "ensemble"
+    write_outcome_run(run, outcome_run_config(run, None, ["primitive.max_primitives=3"]),
+                      model.eval(), False, {"states": 7}, ensemble, [OutcomeModel(38).eval()],
+                      TiltClassifier(18).eval())
+    ensemble_report = tmp_path / "eval_ensemble.json"
+    assert main(["evaluate", "--run", str(ensemble), *args, "--report", str(ensemble_report),
+                 "--set", "outcome.pessimism=1", "--set", "outcome.tilt_veto=0.5"]) == 0
+    facts = json.loads(ensemble_report.read_text())["outcome_model"]
+    assert (facts["members"], facts["pessimism"], facts["tilt_veto"]) == (2, 1.0, 0.5)
+    capsys.readouterr()
+    assert main(["evaluate", "--run", str(outcome), *args, "--report",
+                 str(tmp_path / "no.json"), "--set", "outcome.pessimism=1"]) == 2
+    one_error_line(capsys, "outcome.pessimism 1", "needs an ensemble")
+
     capsys.readouterr()
     broken = tmp_path / "broken"
     shutil.copytree(outcome, broken)

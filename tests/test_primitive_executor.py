@@ -20,8 +20,9 @@ from corn_drake.errors import InputError
 from corn_drake.rl.env import DiagramEnv
 from corn_drake.rl.primitive_env import PrimitiveEnv
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.primitive_executor import (IDLE, PUSH, RETREAT, SETTLE, STATUS_LAYOUT,
-                                                   PrimitivePlanner, make_primitive)
+from corn_drake.systems.primitive_executor import (DESCEND, IDLE, PUSH, RETREAT, SETTLE,
+                                                   STATUS_LAYOUT, PrimitivePlanner,
+                                                   make_primitive, up_turn)
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 from corn_drake.viz.attention_view import viridis_rgb
 from corn_drake.viz.primitive_view import point_locations, primitive_path
@@ -199,12 +200,13 @@ def test_without_settle_steps_the_retreat_ends_idle_and_keypoints_are_not_needed
     memory, _ = _tick(planner, memory, None)
     assert memory[0] == IDLE
     planner, memory = _planner_after_retreat(3)
-    with pytest.raises(ValueError, match="settle_steps needs the object's keypoints"):
+    with pytest.raises(ValueError, match="settle_steps and tilt_stop_deg need the object's"):
         _tick(planner, memory, None)
 
 
-@pytest.mark.parametrize("field, value", [("settle_steps", -1), ("settle_motion", 0.0)])
-def test_a_primitive_env_refuses_a_settle_setting_out_of_range_by_name(field, value):
+@pytest.mark.parametrize("field, value", [("settle_steps", -1), ("settle_motion", 0.0),
+                                          ("tilt_stop_deg", -1.0), ("tilt_stop_deg", 91.0)])
+def test_a_primitive_env_refuses_a_settle_or_tilt_setting_out_of_range_by_name(field, value):
     with pytest.raises(InputError, match=f"primitive.{field} must be"):
         PrimitiveEnv(_config("box"), PrimitiveConfig(**{field: value}))
 
@@ -222,6 +224,50 @@ def test_a_settling_env_step_returns_with_the_object_still():
         assert results[settle][2] == IDLE
     assert not results[0][1] and results[30][1], results  # sliding at the return, then still
     assert results[30][0] > results[0][0], results
+
+
+# ---------------------------------------------------------------------------- the tilt stop
+
+def _about(axis: str, deg: float) -> np.ndarray:
+    return getattr(RotationMatrix, f"Make{axis.upper()}Rotation")(np.deg2rad(deg)).matrix()
+
+
+TALL_BOX = np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03)
+                     for z in (0.0, 0.2)]) + np.array([0.5, 0.0, TABLE_TOP_Z])
+
+
+@pytest.mark.parametrize("turn, degrees", [
+    (lambda: _about("x", 15), 15.0), (lambda: _about("z", 40), 0.0),
+    (lambda: _about("x", 40) @ _about("z", 70), 40.0),
+    (lambda: _about("z", 70) @ _about("y", 25), 25.0)])
+def test_up_turn_is_how_far_the_box_tilted_whatever_its_yaw(turn, degrees):
+    centre = TALL_BOX.mean(axis=0)
+    after = (TALL_BOX - centre) @ turn().T + centre + np.array([0.03, -0.02, 0.01])
+    assert np.rad2deg(up_turn(TALL_BOX, after)) == pytest.approx(degrees, abs=1e-6)
+
+
+@pytest.mark.parametrize("stop_deg, tilt_deg, stops", [(10.0, 3.0, False), (10.0, 12.0, True),
+                                                       (0.0, 30.0, False)])
+def test_a_push_that_starts_to_tip_the_object_stops_and_the_hand_lifts(stop_deg, tilt_deg,
+                                                                      stops):
+    """The push begins at the pre-contact point with the box's keypoints stored; a tick later
+    the box has tilted: past tilt_stop_deg the hand retreats (upward) at once, else it pushes
+    on (along +x); tilt_stop_deg 0 never stops."""
+    planner = PrimitivePlanner(PrimitiveConfig(tilt_stop_deg=stop_deg), ControllerConfig())
+    tool = np.array([0.44, 0.0, TABLE_TOP_Z + 0.03])
+    memory = planner.initial_memory()
+    # _PHASE, the pre-contact point (_PRE) where the tool is, a 10 cm push along +x (_PUSH).
+    memory[0], memory[6:9], memory[9:12] = DESCEND, tool, (0.1, 0.0, 0.0)
+    memory, _ = _tick(planner, memory, TALL_BOX, tool)
+    assert memory[0] == PUSH
+    edge = TALL_BOX[(TALL_BOX[:, 0] > 0.52) & (TALL_BOX[:, 2] < TABLE_TOP_Z + 0.01)].mean(axis=0)
+    tipped = (TALL_BOX - edge) @ _about("y", tilt_deg).T + edge  # about its far bottom edge
+    memory, action = _tick(planner, memory, tipped, tool)
+    move = action[ACTION_SLICES["position"]]
+    if stops:
+        assert memory[0] == RETREAT and move[2] > 0 and abs(move[0]) < 1e-9, move
+    else:
+        assert memory[0] == PUSH and move[0] > 0 and abs(move[2]) < 1e-9, move
 
 
 # ----------------------------------------------------------------------------------- tipping

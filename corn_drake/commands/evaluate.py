@@ -197,8 +197,11 @@ def run(args) -> int:
             # own, so --set reaches them too, e.g. primitive.success_at_rest=true.
             run_cfg = primitive_run_on(base, args.task, args.set)
             agent.primitive_config = run_cfg.primitive
-            # An outcome-model chooser predicts the evaluated task's reward and success.
+            # An outcome-model chooser predicts the evaluated task's reward and success, and
+            # chooses as the run's `outcome:` settings say, --set included.
             agent.task = run_cfg.env.task
+            if agent.outcome_chooser is not None:
+                agent.outcome_chooser.use(run_cfg.outcome)
         else:
             run_cfg = replace_task(base, args.task) if args.task is not None else base
             run_cfg = apply_sets(run_cfg, args.set, only="env")

@@ -46,7 +46,7 @@ class PrimitiveConfig:
               "vertical_push": "[0, 1]", "finger_tilt_deg": "[0, 60]",
               "turn_reward": ">= 0", "exit_penalty": ">= 0", "table_margin": ">= 0",
               "rest_linear_speed": "> 0", "rest_angular_speed": "> 0",
-              "settle_steps": ">= 0", "settle_motion": "> 0"}
+              "settle_steps": ">= 0", "settle_motion": "> 0", "tilt_stop_deg": "[0, 90]"}
     # The tool point stops this far off the surface along the normal before the push. The
     # closed fingers are 0.021 x 0.04 m around the tool point, so 0.04 leaves ~2 cm of air.
     pre_contact_distance: float = 0.04
@@ -84,6 +84,15 @@ class PrimitiveConfig:
     # (docs/results/primitive/, item 37). 0: no waiting (shipped cards replay as they were).
     settle_steps: int = 0
     settle_motion: float = 0.002
+    # The push stops, and the hand retreats, as soon as the object's up direction has turned
+    # more than this many degrees since the push began (from its box keypoints, every policy
+    # period). Why: on push_turn a tipped or rolled object is a failed episode, and a tip can
+    # be seen starting where it cannot be predicted. Measured with the outcome chooser on the
+    # 200 unseen push_turn episodes: 10 / 5 degrees gave 0.355 / 0.365 against 0.355, as many
+    # episodes tipped or rolled (77 / 76 against 72): most of those are lying bottles rolled
+    # by a push, which keep rolling after it stops (docs/results/primitive/, item 38). Hence
+    # 0 by default: pushes run their length.
+    tilt_stop_deg: float = 0.0
     # An episode ends after this many primitives (HACMan's 10), or at the task's episode_steps.
     max_primitives: int = 10
     # The executor's joint stiffness and damping ratio, normalised like the dense action's kp and
@@ -178,6 +187,29 @@ def check_reward_points(primitive: PrimitiveConfig) -> None:
 
 
 @dc.dataclass
+class OutcomeChoiceConfig:
+    """How a run whose chooser is "outcome_model" turns its outcome model file's predictions
+    into a choice (rl/outcome_chooser.py); `evaluate --set outcome.*` reaches them."""
+    BOUNDS = {"pessimism": ">= 0", "tilt_veto": "(0, 1]"}
+    # A candidate's score is its members' mean predicted reward less this many times their
+    # standard deviation (the file must hold an ensemble: outcome_model.py fit --members). Why:
+    # a model fitted on a few hundred objects is confidently wrong on others, and the highest
+    # of hundreds of predictions is mostly the most wrong; on held-out objects' lookahead
+    # states 1.0 raised what the choice earned from 0.009 to 0.032 per primitive, but on the
+    # 200 unseen push_turn episodes success stayed where one model left it (0.340 against
+    # 0.345; docs/results/primitive/, item 38). Hence 0, the mean alone, by default.
+    pessimism: float = 0.0
+    # Candidates the file's tilt classifier (rl/tilt_classifier.py, fit --tilt) gives a
+    # probability above this of tipping or rolling the object are not chosen, unless every
+    # candidate is. Why: on push_turn a tipped object fails the episode, and the outcome
+    # model's choices tipped it a quarter of the time (item 38). Measured on the 200 unseen
+    # push_turn episodes: 0.5 / 0.2 gave 0.280 / 0.230 against 0.345 without: the unseen
+    # objects' rolls and tips stayed (67 episodes), and pushes the task needed were left out.
+    # Hence 1, no veto, by default.
+    tilt_veto: float = 1.0
+
+
+@dc.dataclass
 class PrimitiveTrainConfig(RunSettings):
     """A primitive training run (rl/primitive_trainer.py). total_steps counts primitives (one
     env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
@@ -209,6 +241,7 @@ class PrimitiveTrainConfig(RunSettings):
     # motions ("../push_turn_primitive", `corn-drake ship`), so models/weights does not carry
     # the same 1.7 MB twice. Relative to this folder (rl/checkpoints.run_relative_path).
     agent_weights: str = ""
+    outcome: OutcomeChoiceConfig = dc.field(default_factory=OutcomeChoiceConfig)
     replay_capacity: int = 200_000
     learning_starts: int = 256
     updates_per_step: int = 1

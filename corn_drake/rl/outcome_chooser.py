@@ -1,6 +1,9 @@
 """The contact-primitive policy's choice made by the outcome model (rl/outcome_model.py) instead
 of the critic: at every usable location the actor's motion and a fixed bank of uniform motions
-are candidates, and the candidate of highest predicted reward is the one chosen.
+are candidates, and the candidate of highest predicted reward is the one chosen. With an
+ensemble, the score is the members' mean reward less `outcome.pessimism` times their deviation;
+with a tilt classifier and `outcome.tilt_veto` < 1, the candidates it expects to tip the object
+are left out (config/primitive.OutcomeChoiceConfig says why).
 
 A run folder chooses this way when its config's `chooser` is "outcome_model"; the model is its
 outcome_model.pt (rl/primitive_agent.load_primitive_run). The reward is predicted with the task
@@ -13,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from corn_drake.errors import InputError
 from corn_drake.rl.outcome_model import Candidates, model_inputs, predicted_rewards
 from corn_drake.transforms import from_pose9
 
@@ -21,13 +25,45 @@ BANK_SEED = 0  # the bank is one fixed set: the same observation gets the same c
 
 
 class OutcomeChooser:
-    def __init__(self, model, tokens: bool, facts: dict | None = None):
-        """`facts`: what the model file says of itself (its data, updates), for reports."""
-        self.model, self.tokens = model, bool(tokens)
+    def __init__(self, models, tokens: bool, facts: dict | None = None, tilt=None):
+        """`models`: one outcome model or a list of them (an ensemble); `tilt`: a
+        rl/tilt_classifier.TiltClassifier or None; `facts`: what the model file says of itself
+        (its data, updates), for reports. Chooses by the mean, no veto, until `use`."""
+        self.models = list(models) if isinstance(models, (list, tuple)) else [models]
+        self.tokens, self.tilt = bool(tokens), tilt
         self.facts = {k: v for k, v in (facts or {}).items()
                       if isinstance(v, (int, float, str, bool, list))}
         self.facts["bank_motions"] = BANK
         self.bank = np.random.default_rng(BANK_SEED).uniform(-1.0, 1.0, (BANK, 3))
+        self.pessimism, self.tilt_veto = 0.0, 1.0
+
+    def use(self, choice) -> None:
+        """Chooses as `choice` (a config/primitive.OutcomeChoiceConfig) says; InputError naming
+        the setting the model file cannot serve."""
+        if choice.pessimism > 0 and len(self.models) < 2:
+            raise InputError(f"outcome.pessimism {choice.pessimism:g} needs an ensemble, and the "
+                             "outcome model file holds one model (outcome_model.py fit "
+                             "--members N)")
+        if choice.tilt_veto < 1 and self.tilt is None:
+            raise InputError(f"outcome.tilt_veto {choice.tilt_veto:g} needs a tilt classifier, "
+                             "and the outcome model file has none (outcome_model.py fit --tilt)")
+        self.pessimism, self.tilt_veto = float(choice.pessimism), float(choice.tilt_veto)
+        self.facts.update(pessimism=self.pessimism, tilt_veto=self.tilt_veto)
+
+    def scores(self, candidates: Candidates, task, progress_reward: float) -> np.ndarray:
+        """(R,) each candidate's score: the members' mean predicted reward less pessimism times
+        their deviation, -inf where the tilt veto rules it out (unless it rules out all)."""
+        x, now, frames = model_inputs(candidates, self.tokens)
+        with torch.no_grad():
+            rewards = np.stack([predicted_rewards(candidates, frames, model(x, now), task,
+                                                  progress_reward) for model in self.models], 1)
+        # One model: its own rewards, bit for bit (the mean of one, a deviation of 0).
+        scores = rewards.mean(1) - self.pessimism * rewards.std(1)
+        if self.tilt_veto < 1.0:
+            veto = self.tilt.probability(candidates) > self.tilt_veto
+            if not veto.all():
+                scores = np.where(veto, -np.inf, scores)
+        return scores
 
     def candidates(self, agent, obs: dict):
         """(Candidates, [(location, cloud point, motion)], which locations are usable (L,), every
@@ -65,11 +101,7 @@ class OutcomeChooser:
         `task` (the env config's TaskConfig) and the agent's progress_reward. A location's
         score is its best candidate's predicted reward; its motion, that candidate's."""
         candidates, options, usable, points = self.candidates(agent, obs)
-        x, now, frames = model_inputs(candidates, self.tokens)
-        with torch.no_grad():
-            prediction = self.model(x, now)
-        scores = predicted_rewards(candidates, frames, prediction, task,
-                                   agent.primitive_config.progress_reward)
+        scores = self.scores(candidates, task, agent.primitive_config.progress_reward)
         best = int(np.argmax(scores))
         location, point, motion = options[best]
         per_location = np.full(len(usable), -np.inf)
@@ -77,7 +109,8 @@ class OutcomeChooser:
         for (loc, _, m), score in zip(options, scores):
             if score > per_location[loc]:
                 per_location[loc], motions[loc] = score, m
-        # Locations never scored (ruled out) show as the lowest score, as the critic's choice.
+        # Locations never scored (ruled out, or all their candidates vetoed) show as the lowest
+        # score, as the critic's choice.
         shown = np.where(np.isfinite(per_location), per_location,
                          per_location[np.isfinite(per_location)].min())
         return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,

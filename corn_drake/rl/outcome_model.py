@@ -16,13 +16,12 @@ Inputs and outputs are in the push's frame (the motion's heading turned to +x ab
 vertical), so a push and the same push turned about the vertical are one example.
 
 The data are `lookahead_distill.py collect` folders whose states hold their outcomes
-(rl/lookahead_distill.collect_episode); outcome_model.pt files are written by save_outcome_model.
+(rl/lookahead_distill.collect_episode); outcome_model.pt files are rl/outcome_file.py's.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -189,34 +188,3 @@ def fit_model(data: dict, tokens: bool, updates: int, seed: int) -> OutcomeModel
             if done == updates:
                 break
     return model.eval()
-
-
-# --- the model file ----------------------------------------------------------------------------
-def save_outcome_model(path, model: OutcomeModel, tokens: bool, **facts) -> None:
-    """Writes the model (atomically) with what it takes as input and `facts` (its data)."""
-    from corn_drake.storage.checkpoint_files import save_checkpoint
-
-    save_checkpoint(path, {"model": model.state_dict(), "inputs": int(model.net[0].in_features),
-                           "tokens": bool(tokens), **facts}, keep_previous=False)
-
-
-def load_outcome_model(path) -> tuple[OutcomeModel, dict]:
-    """(the model in eval mode, the file's other entries), or MissingInputError / InputError
-    naming the file."""
-    from corn_drake.errors import InputError, MissingInputError
-    from corn_drake.storage.checkpoint_files import load_checkpoint
-
-    path = Path(path)
-    if not path.is_file():
-        raise MissingInputError(f"{path}: no outcome model (written by docs/results/primitive/"
-                                f"outcome_model.py fit)")
-    saved = load_checkpoint(path, required=("model", "inputs", "tokens"), fallback=False)
-    if saved is None:
-        raise InputError(f"{path}: not an outcome model file")
-    model = OutcomeModel(int(saved["inputs"]))
-    try:
-        model.load_state_dict(saved["model"])
-    except RuntimeError as error:
-        raise InputError(f"{path}: the outcome model's weights do not fit its network "
-                         f"({str(error).splitlines()[0]})") from None
-    return model.eval(), {k: v for k, v in saved.items() if k != "model"}

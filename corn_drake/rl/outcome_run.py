@@ -11,7 +11,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from corn_drake.rl.outcome_model import MODEL_FILE, save_outcome_model
+from corn_drake.rl.outcome_file import save_outcome_model
+from corn_drake.rl.outcome_model import MODEL_FILE
 
 
 def outcome_run_config(run: Path, task: str | None, sets: list[str]):
@@ -29,10 +30,12 @@ def outcome_run_config(run: Path, task: str | None, sets: list[str]):
                                encoder=run_encoder_path(run, base.encoder))
 
 
-def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path) -> None:
+def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path,
+                      members=(), tilt=None) -> None:
     """`out`: a primitive run folder that chooses by `model`: `cfg`, the proposing run's agent
-    weights (checkpoints/last.pt) and the model (outcome_model.pt). Built beside `out` and
-    renamed into place, so `out` is whole or absent."""
+    weights (checkpoints/last.pt) and the model (outcome_model.pt, with `members` and `tilt`
+    as rl/outcome_file.save_outcome_model takes them). Built beside `out` and renamed into
+    place, so `out` is whole or absent."""
     import shutil
     import tempfile
 
@@ -57,7 +60,7 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
     try:
         (building / "checkpoints").mkdir()
         shutil.copyfile(used, building / "checkpoints" / "last.pt")
-        save_outcome_model(building / MODEL_FILE, model, tokens, **facts)
+        save_outcome_model(building / MODEL_FILE, model, tokens, members, tilt, **facts)
         write_run_config(cfg, building)
         building.rename(out)
     except BaseException:

@@ -202,9 +202,12 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
                          f"{', '.join(PRIMITIVE_CHOOSERS)}, got {cfg.chooser!r}")
     if cfg.chooser == "outcome_model":
         from corn_drake.rl.outcome_chooser import OutcomeChooser
-        from corn_drake.rl.outcome_model import MODEL_FILE, load_outcome_model
+        from corn_drake.rl.outcome_file import load_outcome_parts
+        from corn_drake.rl.outcome_model import MODEL_FILE
 
-        model, saved = load_outcome_model(run_dir / MODEL_FILE)
-        agent.outcome_chooser = OutcomeChooser(model, saved["tokens"], saved)
+        parts = load_outcome_parts(run_dir / MODEL_FILE)
+        agent.outcome_chooser = OutcomeChooser(parts.models, parts.facts["tokens"], parts.facts,
+                                               parts.tilt)
+        agent.outcome_chooser.use(cfg.outcome)
         agent.task = cfg.env.task
     return cfg, agent, int(state["global_step"])

@@ -18,6 +18,8 @@ input this system feeds in place of a PolicySystem):
             reach_tolerance starts the push; approach_steps ticks without reaching it give the
             primitive up (reported unreached) and go to retreat;
   push      the target moves from the pre-contact point by the motion in push_steps equal steps;
+            with tilt_stop_deg > 0, a push after which the object's up direction has turned
+            further than that since the push began (its box keypoints) retreats at once;
   retreat   up by retreat_height over retreat_steps ticks; then idle (done), or first
   settle    (settle_steps > 0 only) hold the hand where it is until no box keypoint of the object
             moved more than settle_motion over the last tick, at most settle_steps ticks: the
@@ -76,7 +78,8 @@ _TARGET = slice(16, 19)  # the last commanded target
 _FACING = slice(19, 21)  # the contact normal's horizontal direction (zeros: a top contact)
 _LEAN = 21  # the fingers' lean toward the surface for this primitive (rad; facing_rotation)
 _KEYPOINTS = slice(22, 46)  # the object's box keypoints at the last tick (settle's motion)
-_MEMORY_SIZE = 46
+_PUSH_KEYPOINTS = slice(46, 70)  # ... when the push began (tilt_stop_deg's turn)
+_MEMORY_SIZE = 70
 
 # The palm's lower edge (the finger knuckles) is this far above the tool point: an object whose
 # top is lower than that at the pre-contact point cannot meet the palm, and the fingers stay
@@ -211,11 +214,12 @@ class PrimitivePlanner:
              primitive, object_xy=None, keypoints=None) -> tuple[np.ndarray, np.ndarray]:
         """`primitive`: a callable giving the primitive input (evaluated only when idle);
         `object_xy`: the object's centre (needed with keep_on_table); `keypoints`: the
-        object's 8 box keypoints, world frame (needed with settle_steps)."""
+        object's 8 box keypoints, world frame (needed with settle_steps or tilt_stop_deg)."""
         cfg, m = self.cfg, np.array(memory, float)
         tol = cfg.reach_tolerance
-        if cfg.settle_steps and keypoints is None:
-            raise ValueError("primitive.settle_steps needs the object's keypoints")
+        if (cfg.settle_steps or cfg.tilt_stop_deg) and keypoints is None:
+            raise ValueError("primitive.settle_steps and tilt_stop_deg need the object's "
+                             "keypoints")
         # Settling ends after a tick over which the object hardly moved (judged here, against
         # the keypoints stored at the last tick, and acted on at the tick's end like the
         # fixed-length phases, so the next primitive starts at an idle tick, as displays and
@@ -240,6 +244,12 @@ class PrimitivePlanner:
         if m[_PHASE] == DESCEND and np.linalg.norm(tool_p - m[_PRE]) < tol:
             m[_REACHED] = 1.0
             self._enter(m, PUSH)
+            if keypoints is not None:
+                m[_PUSH_KEYPOINTS] = np.asarray(keypoints, float).reshape(-1)
+        # A push that has begun to tip the object stops here: this tick is the retreat's first.
+        if m[_PHASE] == PUSH and cfg.tilt_stop_deg and up_turn(
+                m[_PUSH_KEYPOINTS], keypoints) > np.deg2rad(cfg.tilt_stop_deg):
+            self._enter(m, RETREAT)
         if m[_PHASE] in (APPROACH, DESCEND) and m[_APPROACH_TICKS] >= cfg.approach_steps:
             m[_REACHED] = 0.0
             self._enter(m, RETREAT)
@@ -304,6 +314,19 @@ def memory_status(memory: np.ndarray) -> np.ndarray:
     out[STATUS_LAYOUT["target"]] = memory[_TARGET]
     out[STATUS_LAYOUT["push"]] = memory[_PUSH]  # as executed (vertical_push, keep_on_table)
     return out
+
+
+def up_turn(before: np.ndarray, after: np.ndarray) -> float:
+    """The angle (rad) the object's up direction turned between two sets of its 8 box
+    keypoints (world frame): the rotation that best carries one set onto the other (Kabsch,
+    about their centroids), applied to the vertical. A turn about the vertical gives 0."""
+    a = np.asarray(before, float).reshape(-1, 3)
+    b = np.asarray(after, float).reshape(-1, 3)
+    a, b = a - a.mean(axis=0), b - b.mean(axis=0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # b ~ a rotation^T
+    return float(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0)))
 
 
 def top_height(keypoints: np.ndarray) -> float:

@@ -1,4 +1,4 @@
-"""Choosing primitives by a model of what they do to the object: README.md's items 35 and 36.
+"""Choosing primitives by a model of what they do to the object: README.md's items 35, 36, 38.
 
     # held-out objects: the outcome model's choices against the rank-fitted critic's
     .venv/bin/python docs/results/primitive/outcome_model.py study \
@@ -21,8 +21,10 @@ the run's critic before and after the rank fit of item 34 on the same states and
 `fit`: the model fitted to every state of `--data`, written as `--out` (a model file) and/or
 `--out-run` (a copy of the run whose actor proposes the motions, with the model as its
 outcome_model.pt, `chooser: outcome_model`, and `--task` / `--set` applied to its config as
-`corn-drake evaluate` applies them). Data: `lookahead_distill.py collect` folders whose states
-hold their outcomes. Everything is written atomically.
+`corn-drake evaluate` applies them); `--members N` fits N models (seeds 0..N-1, the first the
+model a plain fit gives) for `outcome.pessimism`, `--tilt` a tilt classifier
+(rl/tilt_classifier.py) for `outcome.tilt_veto`. Data: `lookahead_distill.py collect` folders
+whose states hold their outcomes. Everything is written atomically.
 """
 
 from __future__ import annotations
@@ -39,12 +41,15 @@ from distill_scaling import (BATCH_ROWS, held_out_objects, load_study_data,  # n
                              select_states, study_arguments)
 
 from corn_drake.rl.lookahead_distill import choice_quality, fit_critic, scores_quality  # noqa: E402
+from corn_drake.rl.outcome_chooser import OutcomeChooser  # noqa: E402
+from corn_drake.rl.outcome_file import save_outcome_model  # noqa: E402
 from corn_drake.rl.outcome_model import (OUTCOME_KEYS, OUTCOME_ROW_KEYS,  # noqa: E402
                                          SCALE, OutcomeModel, data_after, data_candidates,
-                                         fit_model, model_inputs, predicted_rewards,
-                                         save_outcome_model)
+                                         fit_model, model_inputs, predicted_rewards)
 from corn_drake.rl.outcome_run import outcome_run_config, write_outcome_run  # noqa: E402
 from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
+from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
+                                           fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 
 
@@ -109,16 +114,25 @@ def fit(args) -> None:
         raise SystemExit(f"--out-run {args.out_run}: exists; choose a new folder")
     # Before the fit: the run must load and the overrides apply.
     run_cfg = outcome_run_config(args.run, args.task, args.set) if args.out_run else None
+    if args.members < 1:
+        raise SystemExit(f"outcome_model.py fit: --members {args.members}: must be >= 1")
     data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
-    model = fit_model(data, args.tokens, args.updates, 0)
+    # Member k is fitted with seed k: member 0 is the model a fit without --members gives.
+    model, *members = [fit_model(data, args.tokens, args.updates, k)
+                       for k in range(args.members)]
+    tilt = fit_tilt_classifier(box_contact_features(data_candidates(data)), data_tilted(data),
+                               args.updates, 0) if args.tilt else None
     facts = {"states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
              "data": [str(d) for d in args.data], "updates": args.updates,
              "proposing_run": str(args.run)}
+    if run_cfg is not None:  # the run's outcome.* settings must suit the file (one line if not)
+        OutcomeChooser([model, *members], args.tokens, facts, tilt).use(run_cfg.outcome)
     if args.out is not None:
-        save_outcome_model(args.out, model, args.tokens, **facts)
+        save_outcome_model(args.out, model, args.tokens, members, tilt, **facts)
         print(f"wrote {args.out}")
     if args.out_run is not None:
-        write_outcome_run(args.run, run_cfg, model, args.tokens, facts, args.out_run)
+        write_outcome_run(args.run, run_cfg, model, args.tokens, facts, args.out_run, members,
+                          tilt)
         print(f"wrote {args.out_run}: `corn-drake evaluate --run {args.out_run} ...` chooses by "
               f"the model")
     print(f"fitted to {facts['states']} states, {facts['rows']} candidates")
@@ -138,11 +152,16 @@ def main() -> None:
         parser.add_argument("--data", type=Path, nargs="+", required=True)
         parser.add_argument("--updates", type=int, default=2000)
         parser.add_argument("--tokens", action="store_true")
+        parser.add_argument("--members", type=int, default=1,
+                            help="models fitted (seeds 0..N-1): an ensemble for outcome.pessimism")
+        parser.add_argument("--tilt", action="store_true",
+                            help="fit a tilt classifier too (for outcome.tilt_veto)")
         parser.add_argument("--out", type=Path, help="the model file")
         parser.add_argument("--out-run", type=Path, help="a run folder that chooses by the model")
         parser.add_argument("--task", default=None, help="the run folder's task (as evaluate --task)")
         parser.add_argument("--set", action="append", default=[], dest="set",
-                            help="env.* / primitive.* settings of the run folder (as evaluate's)")
+                            help="env.* / primitive.* / outcome.* settings of the run folder "
+                                 "(as evaluate's)")
         from corn_drake.errors import InputError
 
         try:

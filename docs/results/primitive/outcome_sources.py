@@ -19,15 +19,11 @@ Motions are the reward's: the box keypoints with the origin's height dropped
 
 With --splits S, per folder and per split (--holdout-objects objects held out whole, the
 first --object-fractions of the others fitted): the outcome model (rl/outcome_model.fit_model,
---updates updates) and a classifier of `tilted` on the model's own inputs (a 2-layer MLP,
-logistic loss; and the same classifier on 18 box-and-contact features instead: the aim's
-height over the box's bottom as a fraction of its height, the box's height, length and width
-along and across the push, its height over its length, the aim's offset from the box's centre
-along and across the push in half-lengths, the normal and motion in the push's frame, the push
-depth and the physics), each measured on the fitted objects and on the held-out ones: keypoint
-error against "no motion", and the classifiers' ROC AUC. What a model of the primitives learns of
-the objects it saw against what carries over to others, and how that grows with the number of
-objects it saw.
+--updates updates) and rl/tilt_classifier.py's classifier of `tilted`, on the model's own
+inputs and on that module's box-and-contact features (its docstring), each measured on the
+fitted objects and on the held-out ones: keypoint error against "no motion", and the
+classifiers' ROC AUC. What a model of the primitives learns of the objects it saw against what
+carries over to others, and how that grows with the number of objects it saw.
 """
 
 from __future__ import annotations
@@ -38,41 +34,26 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch import nn
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from distill_scaling import held_out_objects, select_states  # noqa: E402
 from lookahead_distill import load_data  # noqa: E402 - the collect folders' reader
 
-from corn_drake.rl.outcome_model import (BATCH_ROWS, OUTCOME_KEYS,  # noqa: E402
+from corn_drake.rl.outcome_model import (OUTCOME_KEYS,  # noqa: E402
                                          OUTCOME_ROW_KEYS, SCALE, data_after, data_candidates,
-                                         fit_model, model_inputs, push_frames)
+                                         fit_model, model_inputs)
+from corn_drake.rl.tilt_classifier import (TILT_DEG, box_contact_features,  # noqa: E402
+                                           data_tilted, fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
-from corn_drake.transforms import quat_wxyz_to_matrix  # noqa: E402
 
 MOVED_M = 0.005
-TILT_DEG = 20.0
-
-
-def _up_turn_deg(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """Degrees between the world's vertical seen in the object's frame before and after."""
-    up = [quat_wxyz_to_matrix(q)[2] for q in before]  # R^T e_z: the third row of R
-    up_after = [quat_wxyz_to_matrix(q)[2] for q in after]
-    cos = np.einsum("ri,ri->r", np.asarray(up), np.asarray(up_after))
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
-def _tilted(data: dict) -> np.ndarray:
-    """Whether each candidate tilted the object (turned its up direction past TILT_DEG)."""
-    return _up_turn_deg(data["outcome_pose"][data["state"], 3:],
-                        data["pose_after"][:, 3:]) > TILT_DEG
 
 
 def sources(data: dict) -> dict:
     """The figures of one folder's data (see the module docstring)."""
     _, now, frames = model_inputs(data_candidates(data), tokens=False)
     motion = np.linalg.norm(data_after(data, frames).numpy() - now.numpy(), axis=2).mean(1) / SCALE
-    tilted = _tilted(data)
+    tilted = data_tilted(data)
     state = data["state"]
     least = np.full(int(state.max()) + 1, np.inf)
     np.minimum.at(least, state, motion)
@@ -87,28 +68,6 @@ def sources(data: dict) -> dict:
             "still_after": float(np.mean(data["still_after"]))}
 
 
-def box_contact_features(data: dict) -> torch.Tensor:
-    """(R, 18) the box-and-contact features of every candidate (module docstring), in the
-    push's frame; lengths in decimetres."""
-    c = data_candidates(data)
-    frames = push_frames(c.motion)
-
-    def turn(v):
-        return np.einsum("rij,r...j->r...i", frames, v)
-
-    corners, aim, normal, motion = turn(c.keypoints), turn(c.aim), turn(c.normal), turn(c.motion)
-    low, high = corners.min(1), corners.max(1)
-    size, centre = high - low, (high + low) / 2
-    length, width, height = size[:, 0], size[:, 1], size[:, 2]
-    features = [(aim[:, 2] - low[:, 2]) / height, height * SCALE, length * SCALE,
-                width * SCALE, height / length, (aim[:, 0] - centre[:, 0]) / (length / 2),
-                (aim[:, 1] - centre[:, 1]) / (width / 2), *normal.T,
-                np.linalg.norm(motion[:, :2], axis=1), motion[:, 2],
-                -(c.motion * c.normal).sum(1)]
-    return torch.as_tensor(np.concatenate([np.stack(features, 1), c.physics], 1),
-                           dtype=torch.float32)
-
-
 def roc_auc(label: np.ndarray, score: np.ndarray) -> float:
     """The probability that a random positive scores above a random negative (ties: half)."""
     label = np.asarray(label, bool)
@@ -120,26 +79,6 @@ def roc_auc(label: np.ndarray, score: np.ndarray) -> float:
     return float(above)
 
 
-def fit_tilt_classifier(x: torch.Tensor, tilted: np.ndarray, updates: int, seed: int):
-    """A 2-layer MLP (128 wide) giving a logit of `tilted` from inputs `x` (standardised by
-    their mean and deviation over the fitted rows)."""
-    torch.manual_seed(seed)
-    mean, deviation = x.mean(0), x.std(0) + 1e-6
-    net = nn.Sequential(nn.Linear(x.shape[1], 128), nn.ReLU(), nn.Linear(128, 128), nn.ReLU(),
-                        nn.Linear(128, 1))
-    optimiser = torch.optim.Adam(net.parameters(), lr=1e-3)
-    y = torch.as_tensor(tilted, dtype=torch.float32)
-    for _ in range(updates):
-        batch = torch.randint(len(x), (BATCH_ROWS,))
-        loss = nn.functional.binary_cross_entropy_with_logits(
-            net((x[batch] - mean) / deviation)[:, 0], y[batch])
-        optimiser.zero_grad()
-        loss.backward()
-        optimiser.step()
-    net.eval()
-    return lambda inputs: net((inputs - mean) / deviation)[:, 0]
-
-
 def _measured(model, classifiers, data: dict) -> dict:
     """`classifiers`: (on the model's inputs, on the box-and-contact features)."""
     x, now, frames = model_inputs(data_candidates(data), tokens=False)
@@ -147,8 +86,8 @@ def _measured(model, classifiers, data: dict) -> dict:
     with torch.no_grad():
         after = model(x, now)[0].numpy()
         logits = classifiers[0](x).numpy()
-        box_logits = classifiers[1](box_contact_features(data)).numpy()
-    tilted = _tilted(data)
+        box_logits = classifiers[1](box_contact_features(data_candidates(data))).numpy()
+    tilted = data_tilted(data)
     return {"keypoint_error_m": float(np.linalg.norm(after - truth, axis=2).mean() / SCALE),
             "no_motion_error_m": float(np.linalg.norm(now.numpy() - truth, axis=2).mean()
                                        / SCALE),
@@ -174,10 +113,10 @@ def cross_object_fits(data: dict, holdout: int, splits: int, updates: int,
             train = select_states(data, np.flatnonzero(np.isin(data["object"], used)))
             model = fit_model(train, tokens=False, updates=updates, seed=split)
             x, _, _ = model_inputs(data_candidates(train), tokens=False)
-            tilted = _tilted(train)
+            tilted = data_tilted(train)
             classifiers = (fit_tilt_classifier(x, tilted, updates, split),
-                           fit_tilt_classifier(box_contact_features(train), tilted, updates,
-                                               split))
+                           fit_tilt_classifier(box_contact_features(data_candidates(train)),
+                                               tilted, updates, split))
             out.append({"split": split, "train_objects": len(used),
                         "fitted": _measured(model, classifiers, train),
                         "held_out": _measured(model, classifiers, held_out)})
