@@ -11,7 +11,7 @@ import torch
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.rl.outcome_file import load_outcome_model, save_outcome_model
+from corn_drake.rl.outcome_file import load_outcome_parts, save_outcome_model
 from corn_drake.rl.outcome_model import (SCALE, Candidates, OutcomeModel, data_after,
                                          data_candidates, fit_model, model_inputs,
                                          predicted_rewards)
@@ -161,20 +161,20 @@ def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
 def test_bad_model_files_are_refused_by_name(tmp_path):
     missing = tmp_path / "outcome_model.pt"
     with pytest.raises(MissingInputError, match="outcome_model.pt"):
-        load_outcome_model(missing)
+        load_outcome_parts(missing)
     missing.write_bytes(b"not a checkpoint")
     with pytest.raises(InputError, match="outcome_model.pt"):
-        load_outcome_model(missing)
+        load_outcome_parts(missing)
     wrong = tmp_path / "wrong.pt"
     model = OutcomeModel(INPUTS)
     save_outcome_model(wrong, model, tokens=False, states=3)
-    loaded, facts = load_outcome_model(wrong)
+    facts = load_outcome_parts(wrong).facts
     assert facts["states"] == 3 and facts["inputs"] == INPUTS and facts["tokens"] is False
     state = torch.load(wrong, weights_only=False)
     state["inputs"] = INPUTS + 1
     torch.save(state, wrong)
     with pytest.raises(InputError, match="wrong.pt.*do not fit"):
-        load_outcome_model(wrong)
+        load_outcome_parts(wrong)
 
 
 # --- ensembles, pessimism and the tilt veto (item 38) ------------------------------------------
@@ -263,7 +263,6 @@ def test_a_fitted_tilt_classifier_vetoes_the_pushes_it_expects_to_tip():
 
 
 def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
-    from corn_drake.rl.outcome_file import load_outcome_parts
     from corn_drake.rl.tilt_classifier import TiltClassifier
 
     torch.manual_seed(0)
@@ -283,8 +282,12 @@ def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
             assert torch.equal(mine(x, now)[0], theirs(x, now)[0])
         features = torch.randn(4, 18)
         assert torch.equal(parts.tilt(features), tilt.eval()(features))
-    # A file written before ensembles (one model, no tilt classifier) loads as one model.
+    # A classifier that does not fit its recorded input size is refused naming the file.
     state = torch.load(path, weights_only=False)
+    torch.save({**state, "tilt_inputs": 5}, path)
+    with pytest.raises(InputError, match="ensemble.pt: the tilt classifier's weights do not fit"):
+        load_outcome_parts(path)
+    # A file written before ensembles (one model, no tilt classifier) loads as one model.
     for key in ("members", "tilt", "tilt_inputs"):
         del state[key]
     torch.save(state, path)

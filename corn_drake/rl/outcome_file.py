@@ -70,8 +70,3 @@ def load_outcome_parts(path) -> OutcomeParts:
     facts["members"] = len(models)
     return OutcomeParts(models, tilt, facts)
 
-
-def load_outcome_model(path) -> tuple[OutcomeModel, dict]:
-    """(the file's first model in eval mode, its other entries): load_outcome_parts's."""
-    parts = load_outcome_parts(path)
-    return parts.models[0], parts.facts
