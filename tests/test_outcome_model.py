@@ -158,6 +158,32 @@ def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
     assert choice["point"] == choice["candidates"][choice["location"]]
 
 
+def test_the_model_is_told_the_push_as_executed_with_less_vertical_push():
+    """primitive.vertical_push scales the executed push's height: the candidates the model
+    scores carry that push, the options the policy returns the action itself."""
+    import dataclasses
+
+    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.primitive_agent import PrimitiveAgent
+    from corn_drake.rl.primitive_env import PrimitiveEnv
+
+    torch.manual_seed(0)
+    agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
+    obs, _ = PrimitiveEnv(load_primitive_env_config("push"), agent=agent).reset(seed=1)
+    chooser = OutcomeChooser(OutcomeModel(INPUTS).eval(), tokens=False)
+    actions = {}
+    for vertical in (1.0, 0.25):
+        agent.primitive_config = dataclasses.replace(agent.primitive_config,
+                                                     vertical_push=vertical)
+        candidates, options, _, _ = chooser.candidates(agent, obs)
+        actions[vertical] = np.stack([motion for _, _, motion in options])
+        np.testing.assert_allclose(candidates.motion,
+                                   actions[vertical] * np.array([1.0, 1.0, vertical]))
+    np.testing.assert_array_equal(actions[1.0], actions[0.25])
+    assert np.abs(actions[1.0][:, 2]).max() > 0.5  # the bank's heights are there to scale
+
+
 def test_bad_model_files_are_refused_by_name(tmp_path):
     missing = tmp_path / "outcome_model.pt"
     with pytest.raises(MissingInputError, match="outcome_model.pt"):

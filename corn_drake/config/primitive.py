@@ -155,7 +155,9 @@ class PrimitiveConfig:
     # push. Why less: the push policy learned to press down hard (motion z near -1 in most of
     # its pushes), which the push task, blind to orientation, never punished, and which rolls
     # or flips lying cylinders and wedges (29 % of its primitives tipped the object on
-    # push_turn's unseen episodes; docs/results/primitive/).
+    # push_turn's unseen episodes; docs/results/primitive/). With the outcome chooser (which
+    # tells its model the push as executed) 0 / 0.5 gave 0.335 / 0.330 against 0.355 on
+    # push_turn, as many lying bottles rolled (item 38).
     vertical_push: float = 1.0
     # For a side contact the fingers lean this far (degrees) from vertical toward the surface,
     # the palm away from it (systems/primitive_executor.facing_rotation: with vertical fingers

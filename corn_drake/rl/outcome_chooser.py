@@ -87,9 +87,14 @@ class OutcomeChooser:
             for motion in np.vstack([actor[location][None], self.bank]):
                 rows.append((int(location), point, motion, aim, normal))
         n = len(rows)
+        # The model is told the push as the executor will make it: primitive.vertical_push
+        # scales the motion's height (every outcome folder so far was collected at 1, where the
+        # action and the push are the same).
+        executed = np.array([1.0, 1.0, agent.primitive_config.vertical_push])
         candidates = Candidates(
             aim=np.stack([r[3] for r in rows]), normal=np.stack([r[4] for r in rows]),
-            motion=np.stack([r[2] for r in rows]), keypoints=np.repeat(keypoints[None], n, 0),
+            motion=np.stack([r[2] for r in rows]) * executed,
+            keypoints=np.repeat(keypoints[None], n, 0),
             physics=np.repeat(np.asarray(obs["physics"], np.float64)[None], n, 0),
             goal_rotation=np.repeat(goal_rotation[None], n, 0),
             goal_position=np.repeat(goal_position[None], n, 0),
