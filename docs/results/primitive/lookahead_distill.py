@@ -71,14 +71,17 @@ def collect(args) -> None:
                      object=np.array(objects))
 
 
-def load_data(files: list[Path]) -> dict[str, np.ndarray]:
+def load_data(files: list[Path], object_tags: list[str] | None = None) -> dict[str, np.ndarray]:
     """The files' states and rows as one data dict; only the keys every file has (files
-    collected before outcomes or objects were stored lack those)."""
+    collected before outcomes or objects were stored lack those). `object_tags`: per file, a
+    prefix for its object ids (files of libraries whose ids coincide, told apart)."""
     parts = [dict(np.load(p)) for p in files]
     common = set.intersection(*(set(part) for part in parts))
     parts = [{k: v for k, v in part.items() if k in common} for part in parts]
     out, offset = {}, 0
-    for part in parts:  # the state indices of each file follow the previous files' states
+    for i, part in enumerate(parts):  # each file's state indices follow the previous files'
+        if object_tags is not None and "object" in part:
+            part["object"] = np.array([object_tags[i] + o for o in part["object"]])
         part["state"] = part["state"] + offset
         offset += len(part["features_tokens"])
         for key, value in part.items():

@@ -49,26 +49,19 @@ TILT_VETO = (0.2, 0.5)  # the classifier's probability of a tilt above which a c
 
 def load_folders(folders: list[Path]) -> dict:
     """The folders' data as one dict, each object id prefixed by its folder's position."""
-    parts = []
+    files, tags = [], []
     for i, folder in enumerate(folders):
-        files = sorted(folder.glob("episodes_*.npz"))
-        if not files:
+        found = sorted(folder.glob("episodes_*.npz"))
+        if not found:
             raise SystemExit(f"--data {folder}: no episodes_*.npz files")
-        part = load_data(files)
-        missing = [k for k in ("object", *OUTCOME_KEYS, *OUTCOME_ROW_KEYS) if k not in part]
-        if missing:
-            raise SystemExit(f"--data {folder}: files without {', '.join(missing)}")
-        part["object"] = np.array([f"{i}:{o}" for o in part["object"]])
-        parts.append(part)
-    keys = set.intersection(*(set(p) for p in parts))
-    out, offset = {}, 0
-    for p in parts:
-        p = dict(p)
-        p["state"] = p["state"] + offset
-        offset += len(p["features_tokens"])
-        for k in keys:
-            out.setdefault(k, []).append(p[k])
-    return {k: np.concatenate(v) for k, v in out.items()}
+        files += found
+        tags += [f"{i}:"] * len(found)
+    data = load_data(files, tags)
+    missing = [k for k in ("object", *OUTCOME_KEYS, *OUTCOME_ROW_KEYS) if k not in data]
+    if missing:
+        raise SystemExit(f"--data {' '.join(map(str, folders))}: files without "
+                         f"{', '.join(missing)}")
+    return data
 
 
 def member_rewards(models: list, data: dict, task, progress_reward: float) -> np.ndarray:
