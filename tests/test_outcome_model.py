@@ -288,6 +288,37 @@ def test_a_fitted_tilt_classifier_vetoes_the_pushes_it_expects_to_tip():
         fit_tilt_classifier(box_contact_features(c), tilted[:3], 1, seed=0)
 
 
+def test_the_tilt_blend_weighs_each_reward_by_the_classifiers_tilt_probability():
+    """The same labels as above: with outcome.tilt_blend a candidate's score is (1 - p) x the
+    model's reward + p x the reward the file's data measured for tilts, so the high push the
+    model prefers (1.0 against 0.3) loses to the low one, and no candidate is left out."""
+    from corn_drake.config.primitive import OutcomeChoiceConfig
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.tilt_classifier import box_contact_features, fit_tilt_classifier
+
+    heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
+    train = _pushes_along_x(heights)
+    classifier = fit_tilt_classifier(box_contact_features(train), heights > 0.005, 600, seed=0)
+    task = load_primitive_env_config("push").task
+    model = _TableModel([[0.10, 0, 0], [0.03, 0, 0]])
+    high_low = _pushes_along_x([0.018, -0.018])
+    chooser = OutcomeChooser([model], tokens=False, facts={"tilted_reward": -0.5},
+                             tilt=classifier)
+    plain = chooser.scores(high_low, task, 10.0)
+    assert plain == pytest.approx([1.0, 0.3], abs=1e-5) and np.argmax(plain) == 0
+    chooser.use(OutcomeChoiceConfig(tilt_blend=True))
+    p = classifier.probability(high_low)
+    scores = chooser.scores(high_low, task, 10.0)
+    assert scores == pytest.approx((1 - p) * plain + p * -0.5, abs=1e-6)
+    assert np.isfinite(scores).all() and np.argmax(scores) == 1
+    assert chooser.facts["tilt_blend"] is True
+    # A file without the measured reward of tilts (fitted before it was recorded), or without a
+    # classifier, cannot blend: one line naming the setting.
+    for facts, tilt in (({}, classifier), ({"tilted_reward": -0.5}, None)):
+        with pytest.raises(InputError, match="outcome.tilt_blend needs a tilt classifier"):
+            OutcomeChooser([model], False, facts, tilt).use(OutcomeChoiceConfig(tilt_blend=True))
+
+
 def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
     from corn_drake.rl.tilt_classifier import TiltClassifier
 
@@ -326,8 +357,10 @@ def test_the_outcome_choice_settings_are_range_checked_where_evaluate_applies_th
     from corn_drake.config.primitive import PrimitiveTrainConfig
 
     base = PrimitiveTrainConfig()
-    cfg = primitive_run_on(base, None, ["outcome.pessimism=2", "outcome.tilt_veto=0.3"])
-    assert (cfg.outcome.pessimism, cfg.outcome.tilt_veto) == (2.0, 0.3)
+    cfg = primitive_run_on(base, None, ["outcome.pessimism=2", "outcome.tilt_veto=0.3",
+                                        "outcome.tilt_blend=true"])
+    assert (cfg.outcome.pessimism, cfg.outcome.tilt_veto, cfg.outcome.tilt_blend) == \
+        (2.0, 0.3, True)
     for bad in ("outcome.tilt_veto=0", "outcome.tilt_veto=1.5", "outcome.pessimism=-1"):
         with pytest.raises(InputError, match=bad.split("=")[0]):
             primitive_run_on(base, None, [bad])

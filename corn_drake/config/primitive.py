@@ -209,6 +209,18 @@ class OutcomeChoiceConfig:
     # objects' rolls and tips stayed (67 episodes), and pushes the task needed were left out.
     # Hence 1, no veto, by default.
     tilt_veto: float = 1.0
+    # Each candidate's predicted reward becomes its expectation under the file's tilt
+    # classifier: (1 - p) x the model's reward + p x the mean reward the file's data measured
+    # for the candidates that did tip or roll (fit --tilt records it: `tilted_reward`). Why: the
+    # outcome model fits tipping and rolling worst of all (item 37), and a hard veto left out
+    # pushes the task needed (above); weighing by the probability keeps every candidate. On
+    # held-out objects' lookahead states it raised what the choice earned per primitive from
+    # 0.012 to 0.035, but on the 200 unseen episodes it lost: push_turn 0.215 against 0.340
+    # for the same file without it, full6d 0.035 against 0.065. Every push that can reach the
+    # goal can also tip, so the choice turned timid (never touched 25 / 32 episodes against
+    # 10 / 11; docs/results/primitive/, item 39). The tilted reward is the collecting task's
+    # (push_turn's, for every folder so far). Hence off by default.
+    tilt_blend: bool = False
 
 
 @dc.dataclass

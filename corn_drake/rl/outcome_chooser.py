@@ -3,7 +3,8 @@ of the critic: at every usable location the actor's motion and a fixed bank of u
 are candidates, and the candidate of highest predicted reward is the one chosen. With an
 ensemble, the score is the members' mean reward less `outcome.pessimism` times their deviation;
 with a tilt classifier and `outcome.tilt_veto` < 1, the candidates it expects to tip the object
-are left out (config/primitive.OutcomeChoiceConfig says why).
+are left out, and with `outcome.tilt_blend` every candidate's reward is its expectation under
+the classifier's probability of a tilt (config/primitive.OutcomeChoiceConfig says why).
 
 A run folder chooses this way when its config's `chooser` is "outcome_model"; the model is its
 outcome_model.pt (rl/primitive_agent.load_primitive_run). The reward is predicted with the task
@@ -35,7 +36,7 @@ class OutcomeChooser:
                       if isinstance(v, (int, float, str, bool, list))}
         self.facts["bank_motions"] = BANK
         self.bank = np.random.default_rng(BANK_SEED).uniform(-1.0, 1.0, (BANK, 3))
-        self.pessimism, self.tilt_veto = 0.0, 1.0
+        self.pessimism, self.tilt_veto, self.tilt_blend = 0.0, 1.0, False
 
     def use(self, choice) -> None:
         """Chooses as `choice` (a config/primitive.OutcomeChoiceConfig) says; InputError naming
@@ -47,16 +48,26 @@ class OutcomeChooser:
         if choice.tilt_veto < 1 and self.tilt is None:
             raise InputError(f"outcome.tilt_veto {choice.tilt_veto:g} needs a tilt classifier, "
                              "and the outcome model file has none (outcome_model.py fit --tilt)")
+        if choice.tilt_blend and (self.tilt is None or "tilted_reward" not in self.facts):
+            raise InputError("outcome.tilt_blend needs a tilt classifier and the reward its "
+                             "data measured for tilts, and the outcome model file lacks them "
+                             "(outcome_model.py fit --tilt)")
         self.pessimism, self.tilt_veto = float(choice.pessimism), float(choice.tilt_veto)
-        self.facts.update(pessimism=self.pessimism, tilt_veto=self.tilt_veto)
+        self.tilt_blend = bool(choice.tilt_blend)
+        self.facts.update(pessimism=self.pessimism, tilt_veto=self.tilt_veto,
+                          tilt_blend=self.tilt_blend)
 
     def scores(self, candidates: Candidates, task, progress_reward: float) -> np.ndarray:
-        """(R,) each candidate's score: the members' mean predicted reward less pessimism times
+        """(R,) each candidate's score: the members' mean predicted reward (with tilt_blend,
+        each member's expected under the classifier's tilt probability) less pessimism times
         their deviation, -inf where the tilt veto rules it out (unless it rules out all)."""
         x, now, frames = model_inputs(candidates, self.tokens)
         with torch.no_grad():
             rewards = np.stack([predicted_rewards(candidates, frames, model(x, now), task,
                                                   progress_reward) for model in self.models], 1)
+        if self.tilt_blend:
+            p = self.tilt.probability(candidates)[:, None]
+            rewards = (1.0 - p) * rewards + p * float(self.facts["tilted_reward"])
         # One model: its own rewards, bit for bit (the mean of one, a deviation of 0).
         scores = rewards.mean(1) - self.pessimism * rewards.std(1)
         if self.tilt_veto < 1.0:

@@ -171,9 +171,15 @@ def fit_model(data: dict, tokens: bool, updates: int, seed: int) -> OutcomeModel
     if missing:
         raise ValueError(f"outcome data without {', '.join(missing)} (collected before "
                          "outcomes were stored)")
-    torch.manual_seed(seed)
     x, now, frames = model_inputs(data_candidates(data), tokens)
-    target = data_after(data, frames)
+    return fit_network(x, now, data_after(data, frames), updates, seed)
+
+
+def fit_network(x: torch.Tensor, now: torch.Tensor, target: torch.Tensor, updates: int,
+                seed: int) -> OutcomeModel:
+    """An OutcomeModel on inputs `x` (R, F) fitted to keypoints after `target` (R, 8, 3) from
+    keypoints now `now` (fit_model's loss and steps; studies of other inputs call it)."""
+    torch.manual_seed(seed)
     model = OutcomeModel(x.shape[1])
     optimiser = torch.optim.Adam(model.parameters(), lr=3e-4)
     done = 0

@@ -21,10 +21,12 @@ the run's critic before and after the rank fit of item 34 on the same states and
 `fit`: the model fitted to every state of `--data`, written as `--out` (a model file) and/or
 `--out-run` (a copy of the run whose actor proposes the motions, with the model as its
 outcome_model.pt, `chooser: outcome_model`, and `--task` / `--set` applied to its config as
-`corn-drake evaluate` applies them); `--members N` fits N models (seeds 0..N-1, the first the
-model a plain fit gives) for `outcome.pessimism`, `--tilt` a tilt classifier
-(rl/tilt_classifier.py) for `outcome.tilt_veto`. Data: `lookahead_distill.py collect` folders
-whose states hold their outcomes. Everything is written atomically.
+`corn-drake evaluate` applies them); `--members N` fits N models (seeds S..S+N-1 for `--seed S`,
+0 by default; the first the model a plain fit gives) for `outcome.pessimism`, `--tilt` a tilt
+classifier (rl/tilt_classifier.py) for `outcome.tilt_veto` and `outcome.tilt_blend` (with the
+mean reward its data measured for the candidates that tipped or rolled). Data:
+`lookahead_distill.py collect` folders whose states hold their outcomes. Everything is written
+atomically.
 """
 
 from __future__ import annotations
@@ -117,14 +119,20 @@ def fit(args) -> None:
     if args.members < 1:
         raise SystemExit(f"outcome_model.py fit: --members {args.members}: must be >= 1")
     data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
-    # Member k is fitted with seed k: member 0 is the model a fit without --members gives.
-    model, *members = [fit_model(data, args.tokens, args.updates, k)
+    # Member k is fitted with seed S + k: member 0 is the model a fit without --members gives.
+    model, *members = [fit_model(data, args.tokens, args.updates, args.seed + k)
                        for k in range(args.members)]
-    tilt = fit_tilt_classifier(box_contact_features(data_candidates(data)), data_tilted(data),
-                               args.updates, 0) if args.tilt else None
+    tilted = data_tilted(data)
+    tilt = fit_tilt_classifier(box_contact_features(data_candidates(data)), tilted,
+                               args.updates, args.seed) if args.tilt else None
     facts = {"states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
              "data": [str(d) for d in args.data], "updates": args.updates,
-             "proposing_run": str(args.run)}
+             "seed": args.seed, "proposing_run": str(args.run)}
+    if args.tilt:  # what a tilt earned in these data, for outcome.tilt_blend
+        if not tilted.any():
+            raise SystemExit(f"--data {' '.join(map(str, args.data))}: no candidate tipped or "
+                             "rolled its object; a tilt classifier has nothing to learn")
+        facts["tilted_reward"] = float(data["reward"][tilted].mean())
     if run_cfg is not None:  # the run's outcome.* settings must suit the file (one line if not)
         OutcomeChooser([model, *members], args.tokens, facts, tilt).use(run_cfg.outcome)
     if args.out is not None:
@@ -153,9 +161,14 @@ def main() -> None:
         parser.add_argument("--updates", type=int, default=2000)
         parser.add_argument("--tokens", action="store_true")
         parser.add_argument("--members", type=int, default=1,
-                            help="models fitted (seeds 0..N-1): an ensemble for outcome.pessimism")
+                            help="models fitted (seeds S..S+N-1): an ensemble for "
+                                 "outcome.pessimism")
+        parser.add_argument("--seed", type=int, default=0,
+                            help="S, the first member's seed (how far one fit lands from "
+                                 "another on the same data)")
         parser.add_argument("--tilt", action="store_true",
-                            help="fit a tilt classifier too (for outcome.tilt_veto)")
+                            help="fit a tilt classifier too (for outcome.tilt_veto and "
+                                 "outcome.tilt_blend)")
         parser.add_argument("--out", type=Path, help="the model file")
         parser.add_argument("--out-run", type=Path, help="a run folder that chooses by the model")
         parser.add_argument("--task", default=None, help="the run folder's task (as evaluate --task)")
