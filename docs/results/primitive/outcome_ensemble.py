@@ -64,6 +64,18 @@ def load_folders(folders: list[Path]) -> dict:
     return data
 
 
+def load_study(run, folders: list[Path], holdout_objects: int):
+    """(the run's config, the folders' data, their objects) for a held-out-objects study, or
+    SystemExit when fewer objects than `holdout_objects` would be left to fit on."""
+    base, _, _ = load_primitive_run(run)
+    data = load_folders(folders)
+    objects = sorted(set(data["object"]))
+    if holdout_objects >= len(objects):
+        raise SystemExit(f"--holdout-objects {holdout_objects}: the data have only "
+                         f"{len(objects)} objects")
+    return base, data, objects
+
+
 def member_rewards(models: list, data: dict, task, progress_reward: float) -> np.ndarray:
     """(rows, members) each member's predicted reward of every candidate."""
     candidates = data_candidates(data)
@@ -131,13 +143,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    base, _, _ = load_primitive_run(args.run)
+    base, data, objects = load_study(args.run, args.data, args.holdout_objects)
     task, progress = base.env.task, base.primitive.progress_reward
-    data = load_folders(args.data)
-    objects = sorted(set(data["object"]))
-    if args.holdout_objects >= len(objects):
-        raise SystemExit(f"--holdout-objects {args.holdout_objects}: the data have only "
-                         f"{len(objects)} objects")
     report = {"run": str(args.run), "data": [str(d) for d in args.data],
               "states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
               "objects": len(objects), "holdout_objects": args.holdout_objects,

@@ -47,14 +47,13 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from distill_scaling import held_out_objects, select_states  # noqa: E402
-from outcome_ensemble import load_folders  # noqa: E402
+from outcome_ensemble import load_study  # noqa: E402
 from outcome_sources import roc_auc  # noqa: E402
 
 from corn_drake.rl.lookahead_distill import scores_quality  # noqa: E402
 from corn_drake.rl.outcome_model import (SCALE, data_after, data_candidates,  # noqa: E402
                                          fit_network, model_inputs, predicted_rewards,
                                          rotation_matrices)
-from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
 from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
                                            fit_tilt_classifier)
 from corn_drake.scene.objects import TABLE_TOP_Z  # noqa: E402
@@ -205,13 +204,8 @@ def main() -> None:
         raise SystemExit(f"--library: {len(args.library)} libraries for {len(args.data)} --data "
                          "folders (one each)")
     torch.set_num_threads(1)
-    base, _, _ = load_primitive_run(args.run)
+    base, data, objects = load_study(args.run, args.data, args.holdout_objects)
     task, progress = base.env.task, base.primitive.progress_reward
-    data = load_folders(args.data)
-    objects = sorted(set(data["object"]))
-    if args.holdout_objects >= len(objects):
-        raise SystemExit(f"--holdout-objects {args.holdout_objects}: the data have only "
-                         f"{len(objects)} objects")
     points, normals = state_clouds(data, args.library)
     c = data_candidates(data)
     state = data["state"]
