@@ -119,20 +119,21 @@ def fit(args) -> None:
     if args.members < 1:
         raise SystemExit(f"outcome_model.py fit: --members {args.members}: must be >= 1")
     data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
-    # Member k is fitted with seed S + k: member 0 is the model a fit without --members gives.
-    model, *members = [fit_model(data, args.tokens, args.updates, args.seed + k)
-                       for k in range(args.members)]
-    tilted = data_tilted(data)
-    tilt = fit_tilt_classifier(box_contact_features(data_candidates(data)), tilted,
-                               args.updates, args.seed) if args.tilt else None
     facts = {"states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
              "data": [str(d) for d in args.data], "updates": args.updates,
              "seed": args.seed, "proposing_run": str(args.run)}
-    if args.tilt:  # what a tilt earned in these data, for outcome.tilt_blend
+    tilt = None
+    if args.tilt:  # checked before any fit: data without a tilt give a classifier nothing
+        tilted = data_tilted(data)
         if not tilted.any():
             raise SystemExit(f"--data {' '.join(map(str, args.data))}: no candidate tipped or "
                              "rolled its object; a tilt classifier has nothing to learn")
-        facts["tilted_reward"] = float(data["reward"][tilted].mean())
+        tilt = fit_tilt_classifier(box_contact_features(data_candidates(data)), tilted,
+                                   args.updates, args.seed)
+        facts["tilted_reward"] = float(data["reward"][tilted].mean())  # for outcome.tilt_blend
+    # Member k is fitted with seed S + k: member 0 is the model a fit without --members gives.
+    model, *members = [fit_model(data, args.tokens, args.updates, args.seed + k)
+                       for k in range(args.members)]
     if run_cfg is not None:  # the run's outcome.* settings must suit the file (one line if not)
         OutcomeChooser([model, *members], args.tokens, facts, tilt).use(run_cfg.outcome)
     if args.out is not None:
