@@ -153,6 +153,17 @@ def reachable_from_above(point_z, normal_z, cfg: PrimitiveConfig):
     return natural >= TABLE_TOP_Z + cfg.min_tool_height - cfg.reach_tolerance
 
 
+def pre_contact_point(point, normal, cfg: PrimitiveConfig) -> np.ndarray:
+    """Where the descent ends for a contact point: pre_contact_distance off it along its unit
+    normal (straight up for a zero normal), never lower than min_tool_height over the table."""
+    n = np.asarray(normal, float)
+    norm = np.linalg.norm(n)
+    n = n / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
+    pre = np.asarray(point, float) + cfg.pre_contact_distance * n
+    pre[2] = max(pre[2], TABLE_TOP_Z + cfg.min_tool_height)
+    return pre
+
+
 class PrimitivePlanner:
     """The executor's tick as plain numpy: `plan(memory, tool_p, tool_R, top_z, primitive)` ->
     (next memory, action). Kept apart from the LeafSystem so tests can drive it directly."""
@@ -174,12 +185,7 @@ class PrimitivePlanner:
         return m
 
     def pre_contact(self, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
-        n = np.asarray(normal, float)
-        norm = np.linalg.norm(n)
-        n = n / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
-        pre = np.asarray(point, float) + self.cfg.pre_contact_distance * n
-        pre[2] = max(pre[2], TABLE_TOP_Z + self.cfg.min_tool_height)
-        return pre
+        return pre_contact_point(point, normal, self.cfg)
 
     def _start(self, m: np.ndarray, primitive: np.ndarray, top_z: float,
                object_xy=None) -> None:

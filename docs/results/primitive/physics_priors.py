@@ -56,8 +56,8 @@ from corn_drake.rl.outcome_model import (SCALE, data_after, data_candidates,  # 
                                          rotation_matrices)
 from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
                                            fit_tilt_classifier)
-from corn_drake.scene.objects import TABLE_TOP_Z  # noqa: E402
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
+from corn_drake.systems.primitive_executor import pre_contact_point  # noqa: E402
 from corn_drake.transforms import quat_wxyz_to_matrix  # noqa: E402
 
 CLOUD_POINTS = 512  # the observation's (env.scene.object.cloud_points)
@@ -180,11 +180,11 @@ def planar_push(points, normals, pre, push, physics) -> tuple[np.ndarray, np.nda
     return moved, yaw, touched
 
 
-def analytic_prediction(moved, yaw, frames, now):
-    """planar_push's outcome as an outcome model's prediction (push frame, decimetres)."""
-    displacement = np.einsum("rij,rj->ri", frames, np.pad(moved, ((0, 0), (0, 1)))) * SCALE
+def analytic_prediction(moved_push, yaw, now):
+    """planar_push's outcome (its displacement already in the push frame, decimetres) as an
+    outcome model's prediction."""
     rotation = torch.as_tensor(np.pad(yaw[:, None], ((0, 0), (2, 0))), dtype=torch.float32)
-    displacement = torch.as_tensor(displacement, dtype=torch.float32)
+    displacement = torch.as_tensor(moved_push, dtype=torch.float32)
     return now @ rotation_matrices(rotation).transpose(1, 2) + displacement[:, None], \
         displacement, rotation
 
@@ -215,15 +215,13 @@ def main() -> None:
     target = data_after(data, frames)
     support = torch.as_tensor(support_features(points[state], aim, c.motion),
                               dtype=torch.float32)
-    unit = c.normal / np.maximum(np.linalg.norm(c.normal, axis=1, keepdims=True), 1e-9)
-    pre = aim + base.primitive.pre_contact_distance * unit
-    pre[:, 2] = np.maximum(pre[:, 2], TABLE_TOP_Z + base.primitive.min_tool_height)
+    pre = np.stack([pre_contact_point(a, n, base.primitive) for a, n in zip(aim, c.normal)])
     moved, yaw, touched = planar_push(points[state], normals[state], pre,
                                       c.motion * base.primitive.push_distance, c.physics)
-    analytic = analytic_prediction(moved, yaw, frames, now)
-    analytic_inputs = torch.as_tensor(np.concatenate([
-        np.einsum("rij,rj->ri", frames, np.pad(moved, ((0, 0), (0, 1))))[:, :2] * SCALE,
-        yaw[:, None], touched[:, None]], 1), dtype=torch.float32)
+    moved_push = np.einsum("rij,rj->ri", frames, np.pad(moved, ((0, 0), (0, 1)))) * SCALE
+    analytic = analytic_prediction(moved_push, yaw, now)
+    analytic_inputs = torch.as_tensor(np.concatenate([moved_push[:, :2], yaw[:, None],
+                                                      touched[:, None]], 1), dtype=torch.float32)
     tilted = data_tilted(data)
     box = box_contact_features(c)
     no_motion = np.linalg.norm(now.numpy() - target.numpy(), axis=2).mean(1) / SCALE
