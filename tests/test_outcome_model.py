@@ -131,6 +131,23 @@ def test_a_fit_learns_how_far_a_push_carries_the_object():
         fit_model({k: v for k, v in data.items() if k != "pose_after"}, False, 1, 0)
 
 
+def test_a_fit_records_its_learning_curve_without_changing_its_weights():
+    """The history a shipped outcome folder's training_history.json holds: a row every
+    HISTORY_EVERY updates and one at the last, the loss falling on data it can learn, and the
+    weights bit for bit those of a fit that records nothing (the shipped model refits exactly)."""
+    from corn_drake.rl.outcome_model import HISTORY_EVERY
+
+    data = _synthetic_data(32, np.random.default_rng(1))
+    updates = 2 * HISTORY_EVERY + 30
+    history = []
+    recorded = fit_model(data, False, updates, seed=3, history=history)
+    plain = fit_model(data, False, updates, seed=3)
+    assert [row["update"] for row in history] == [HISTORY_EVERY, 2 * HISTORY_EVERY, updates]
+    assert history[-1]["huber_loss"] < 0.5 * history[0]["huber_loss"], history
+    for key, value in plain.state_dict().items():
+        assert torch.equal(value, recorded.state_dict()[key]), key
+
+
 def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
     """The chooser's push frames back in the world: told that every push carries the object
     5 cm along its own heading, it chooses a motion heading for the goal (5 cm away in +y)."""
@@ -201,6 +218,48 @@ def test_bad_model_files_are_refused_by_name(tmp_path):
     torch.save(state, wrong)
     with pytest.raises(InputError, match="wrong.pt.*do not fit"):
         load_outcome_parts(wrong)
+
+
+def test_a_model_of_object_relative_inputs_learns_pushes_and_its_file_says_what_it_reads(
+        tmp_path):
+    """input_kind "box_contact" (item 40): the model reads box_contact_features, learns the
+    synthetic world's pushes from them, its file records the kind and the chooser feeds it the
+    same features (its scores are the model's own predicted rewards); an unknown kind is refused
+    by name, and a file from before kinds were recorded reads as "raw"."""
+    from corn_drake.config.primitive import OutcomeChoiceConfig
+    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.outcome_model import INPUT_KINDS, box_contact_features
+
+    data = _synthetic_data(64, np.random.default_rng(2))
+    model = fit_model(data, tokens=False, updates=600, seed=0, kind="box_contact")
+    c = data_candidates(data)
+    x, now, frames = model_inputs(c, tokens=False, kind="box_contact")
+    assert model.net[0].in_features == box_contact_features(c).shape[1] == 18
+    torch.testing.assert_close(x, box_contact_features(c))
+    truth = data_after(data, frames)
+    with torch.no_grad():
+        predicted = model(x, now)
+    error = (predicted[0] - truth).norm(dim=2).mean()
+    still = (now - truth).norm(dim=2).mean()
+    assert error < 0.25 * still, (float(error), float(still))
+
+    path = tmp_path / "box.pt"
+    save_outcome_model(path, model, tokens=False, input_kind="box_contact", states=64)
+    parts = load_outcome_parts(path)
+    assert parts.facts["input_kind"] == "box_contact"
+    chooser = OutcomeChooser(parts.models, False, parts.facts)
+    chooser.use(OutcomeChoiceConfig())
+    task = load_primitive_env_config("push_turn").task
+    np.testing.assert_allclose(chooser.scores(c, task, 10.0),
+                               predicted_rewards(c, frames, predicted, task, 10.0), rtol=1e-6)
+    with pytest.raises(ValueError, match="input kind must be one of raw, box_contact"):
+        model_inputs(c, tokens=False, kind="cloud")
+    save_outcome_model(path, model, tokens=False, input_kind="cloud")
+    with pytest.raises(InputError, match="box.pt: input_kind must be one of"):
+        load_outcome_parts(path)
+    old = tmp_path / "old.pt"
+    save_outcome_model(old, OutcomeModel(INPUTS), tokens=False)
+    assert load_outcome_parts(old).facts["input_kind"] == "raw" == INPUT_KINDS[0]
 
 
 # --- ensembles, pessimism and the tilt veto (item 38) ------------------------------------------

@@ -217,6 +217,10 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     assert (gallery / entry["image"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+# An outcome model file's learning curve (rl/outcome_model.fit_network's rows).
+FIT_HISTORY = [{"update": 100, "huber_loss": 0.04}, {"update": 150, "huber_loss": 0.03}]
+
+
 def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
         shipped, tmp_path, capsys):
     """A run folder written by write_outcome_run (config chooser: outcome_model) chooses by its
@@ -235,7 +239,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
     torch.nn.init.normal_(model.net[-1].weight, std=0.1)  # the fresh model says "no motion"
     outcome = tmp_path / "runs" / "outcome"
     write_outcome_run(run, outcome_run_config(run, None, ["primitive.max_primitives=3"]),
-                      model.eval(), False, {"states": 7}, outcome)
+                      model.eval(), False, {"states": 7, "fit_history": FIT_HISTORY}, outcome)
     assert sorted(p.relative_to(outcome).as_posix() for p in outcome.rglob("*")
                   if p.is_file()) == ["checkpoints/last.pt", "config.yaml", MODEL_FILE]
     report_path = tmp_path / "eval_outcome.json"
@@ -246,6 +250,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
     _check_report(report, 2)
     assert critic_report["chooser"] == "critic" and report["chooser"] == "outcome_model"
     assert report["outcome_model"]["states"] == 7 and report["outcome_model"]["bank_motions"] == 32
+    assert "fit_history" not in report["outcome_model"]  # the curve goes to the shipped folder
     assert not report.get("overrides")  # the run's own settings (3 primitives) are its config's
 
     from corn_drake.rl.primitive_agent import load_primitive_run
@@ -265,6 +270,9 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
         assert shipped_agent.outcome_chooser is not None
         assert card["chooser"] == "outcome_model" and card["outcome_model"]["file"] == MODEL_FILE
         assert MODEL_FILE in card["bytes"]
+        # Its learning curve is its model's fit, not the proposing run's TD3 history.
+        assert json.loads((out / "training_history.json").read_text())["history"] == FIT_HISTORY
+        assert "fit_history" not in card["outcome_model"]
         assert ("checkpoints/last.pt" in card["bytes"]) == (out == alone), card["bytes"]
         assert shipped_cfg.agent_weights == ("" if out == alone else "../push_primitive")
         again = tmp_path / "eval_shipped_outcome.json"

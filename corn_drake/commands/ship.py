@@ -290,12 +290,17 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     else:
         _save_weights(out, weights)
     # Its learning curve travels too (the checkpoint's history rows): the run folder does not
-    # outlive its machine, and the card's number should come with how it was reached.
+    # outlive its machine, and the card's number should come with how it was reached. An
+    # outcome run's choices were learned by its model's fit, not by TD3 in this folder: its
+    # curve is the fit's (rows of "update" and "huber_loss"; empty for files from before).
     from corn_drake.storage.atomic_files import write_json
 
+    history = state.get("history", [])
+    if agent.outcome_chooser is not None:
+        history = agent.outcome_chooser.fit_history
     write_json(out / "training_history.json",
                {"policy": cfg.policy, "task": cfg.env.task.name,
-                "history": state.get("history", [])})
+                "history": history})
     chooser = {"chooser": cfg.chooser}
     if agent.outcome_chooser is not None:
         # The model that chooses travels with the actor that proposes motions.

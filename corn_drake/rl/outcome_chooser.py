@@ -32,8 +32,13 @@ class OutcomeChooser:
         (its data, updates), for reports. Chooses by the mean, no veto, until `use`."""
         self.models = list(models) if isinstance(models, (list, tuple)) else [models]
         self.tokens, self.tilt = bool(tokens), tilt
-        self.facts = {k: v for k, v in (facts or {}).items()
+        facts = dict(facts or {})
+        # The fit's learning curve (outcome_model.fit_network's rows) goes to a shipped folder's
+        # training_history.json, not into every report's facts.
+        self.fit_history = list(facts.pop("fit_history", []))
+        self.facts = {k: v for k, v in facts.items()
                       if isinstance(v, (int, float, str, bool, list))}
+        self.input_kind = self.facts.setdefault("input_kind", "raw")  # model_inputs' kind
         self.facts["bank_motions"] = BANK
         self.bank = np.random.default_rng(BANK_SEED).uniform(-1.0, 1.0, (BANK, 3))
         self.pessimism, self.tilt_veto, self.tilt_blend = 0.0, 1.0, False
@@ -61,7 +66,7 @@ class OutcomeChooser:
         """(R,) each candidate's score: the members' mean predicted reward (with tilt_blend,
         each member's expected under the classifier's tilt probability) less pessimism times
         their deviation, -inf where the tilt veto rules it out (unless it rules out all)."""
-        x, now, frames = model_inputs(candidates, self.tokens)
+        x, now, frames = model_inputs(candidates, self.tokens, self.input_kind)
         with torch.no_grad():
             rewards = np.stack([predicted_rewards(candidates, frames, model(x, now), task,
                                                   progress_reward) for model in self.models], 1)

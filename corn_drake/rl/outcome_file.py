@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from corn_drake.rl.outcome_model import OutcomeModel
+from corn_drake.rl.outcome_model import INPUT_KINDS, OutcomeModel
 from corn_drake.rl.tilt_classifier import TiltClassifier
 
 
@@ -68,5 +68,9 @@ def load_outcome_parts(path) -> OutcomeParts:
                       "tilt classifier")
     facts = {k: v for k, v in saved.items() if k not in ("model", "members", "tilt")}
     facts["members"] = len(models)
+    facts.setdefault("input_kind", "raw")  # files from before input kinds were recorded
+    if facts["input_kind"] not in INPUT_KINDS:
+        raise InputError(f"{path}: input_kind must be one of {', '.join(INPUT_KINDS)}, got "
+                         f"{facts['input_kind']!r}")
     return OutcomeParts(models, tilt, facts)
 

@@ -13,7 +13,9 @@ surface normal, the push motion ([-1, 1]^3), the object's 8 box keypoints at its
 (relative to its origin), the episode's physics (mass, frictions, restitution) and optionally
 the location's contact token. Outputs: the object's planar displacement and rotation vector.
 Inputs and outputs are in the push's frame (the motion's heading turned to +x about the
-vertical), so a push and the same push turned about the vertical are one example.
+vertical), so a push and the same push turned about the vertical are one example. A model of
+input kind "box_contact" reads object-relative numbers instead (box_contact_features: the aim's
+height as a fraction of the box's, the box's proportions along and across the push...).
 
 The data are `lookahead_distill.py collect` folders whose states hold their outcomes
 (rl/lookahead_distill.collect_episode); outcome_model.pt files are rl/outcome_file.py's.
@@ -32,10 +34,14 @@ from corn_drake.transforms import quat_wxyz_to_matrix
 SCALE = 10.0  # metres -> decimetres, as the policy's features
 PLANAR = np.array([1.0, 1.0, 0.0])  # the reward's keypoints drop the origin's height
 BATCH_ROWS = 256  # candidates per update
+HISTORY_EVERY = 100  # updates per row of a fit's learning curve (fit_network)
 # The collected arrays a fit needs: per state, then per candidate.
 OUTCOME_KEYS = ("outcome_pose", "outcome_goal", "outcome_corners", "outcome_aims",
                 "outcome_physics")
 OUTCOME_ROW_KEYS = ("pose_after", "still_after", "success_after")
+# What an outcome model reads (model_inputs): the candidate's own numbers, or object-relative
+# ones; files from before input kinds were recorded are "raw".
+INPUT_KINDS = ("raw", "box_contact")
 MODEL_FILE = "outcome_model.pt"  # in a run folder whose config's chooser is "outcome_model"
 
 
@@ -65,11 +71,44 @@ def _turn(frames: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("rij,r...j->r...i", frames, v)
 
 
-def model_inputs(c: Candidates, tokens: bool) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
-    """(inputs (R, F), keypoints now (R, 8, 3), push frames (R, 3, 3)): push frame, decimetres."""
+def box_contact_features(c: Candidates) -> torch.Tensor:
+    """(R, 13 + physics) object-relative features of every candidate, so that what is learned
+    of a box's proportions carries to other objects (rl/tilt_classifier.py; an outcome model's
+    inputs with input_kind "box_contact"). In the push's frame: the aim point's height over the
+    box's bottom as a fraction of the box's height; the box's height, length and width
+    (decimetres); its height over its length; the aim point's offset from the box's centre
+    along and across the push in half-lengths; the surface normal; the motion's horizontal
+    length and its vertical part; how far the motion goes into the surface (minus its dot
+    product with the normal); and the episode's physics."""
     frames = push_frames(c.motion)
-    parts = [_turn(frames, c.aim) * SCALE, _turn(frames, c.normal), _turn(frames, c.motion),
-             _turn(frames, c.keypoints).reshape(len(frames), -1) * SCALE, c.physics]
+    corners, aim = _turn(frames, c.keypoints), _turn(frames, c.aim)
+    normal, motion = _turn(frames, c.normal), _turn(frames, c.motion)
+    low, high = corners.min(1), corners.max(1)
+    size, centre = high - low, (high + low) / 2
+    length, width, height = size[:, 0], size[:, 1], size[:, 2]
+    features = [(aim[:, 2] - low[:, 2]) / height, height * SCALE, length * SCALE,
+                width * SCALE, height / length, (aim[:, 0] - centre[:, 0]) / (length / 2),
+                (aim[:, 1] - centre[:, 1]) / (width / 2), *normal.T,
+                np.linalg.norm(motion[:, :2], axis=1), motion[:, 2],
+                -(c.motion * c.normal).sum(1)]
+    return torch.as_tensor(np.concatenate([np.stack(features, 1), c.physics], 1),
+                           dtype=torch.float32)
+
+
+def model_inputs(c: Candidates, tokens: bool, kind: str = "raw"
+                 ) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+    """(inputs (R, F), keypoints now (R, 8, 3), push frames (R, 3, 3)): push frame, decimetres.
+    `kind` (INPUT_KINDS): "raw", the aim, normal, motion and box keypoints themselves, or
+    "box_contact", box_contact_features (item 40: they carry to unseen objects better)."""
+    if kind not in INPUT_KINDS:
+        raise ValueError(f"outcome model input kind must be one of {', '.join(INPUT_KINDS)}, "
+                         f"got {kind!r}")
+    frames = push_frames(c.motion)
+    if kind == "box_contact":
+        parts = [box_contact_features(c).numpy().astype(np.float64)]
+    else:
+        parts = [_turn(frames, c.aim) * SCALE, _turn(frames, c.normal), _turn(frames, c.motion),
+                 _turn(frames, c.keypoints).reshape(len(frames), -1) * SCALE, c.physics]
     if tokens:
         parts.append(c.tokens)
     x = torch.as_tensor(np.concatenate(parts, 1), dtype=torch.float32)
@@ -164,25 +203,30 @@ def data_after(data: dict, frames: np.ndarray) -> torch.Tensor:
     return torch.as_tensor(_turn(frames, after) * SCALE, dtype=torch.float32)
 
 
-def fit_model(data: dict, tokens: bool, updates: int, seed: int) -> OutcomeModel:
+def fit_model(data: dict, tokens: bool, updates: int, seed: int,
+              history: list | None = None, kind: str = "raw") -> OutcomeModel:
     """A model fitted to every row of `data` (Huber loss on the keypoints after, `updates`
-    Adam steps of BATCH_ROWS rows), in eval mode."""
+    Adam steps of BATCH_ROWS rows) on model_inputs of `kind`, in eval mode; `history` as
+    fit_network's."""
     missing = [k for k in OUTCOME_KEYS + OUTCOME_ROW_KEYS if k not in data]
     if missing:
         raise ValueError(f"outcome data without {', '.join(missing)} (collected before "
                          "outcomes were stored)")
-    x, now, frames = model_inputs(data_candidates(data), tokens)
-    return fit_network(x, now, data_after(data, frames), updates, seed)
+    x, now, frames = model_inputs(data_candidates(data), tokens, kind)
+    return fit_network(x, now, data_after(data, frames), updates, seed, history)
 
 
 def fit_network(x: torch.Tensor, now: torch.Tensor, target: torch.Tensor, updates: int,
-                seed: int) -> OutcomeModel:
+                seed: int, history: list | None = None) -> OutcomeModel:
     """An OutcomeModel on inputs `x` (R, F) fitted to keypoints after `target` (R, 8, 3) from
-    keypoints now `now` (fit_model's loss and steps; studies of other inputs call it)."""
+    keypoints now `now` (fit_model's loss and steps; studies of other inputs call it). Given a
+    list `history`, appends the fit's learning curve to it: every HISTORY_EVERY updates (and at
+    the last) {"update", "huber_loss"}, the mean loss of the batches since the previous row.
+    Recording draws no random numbers: the weights are those of a fit without it."""
     torch.manual_seed(seed)
     model = OutcomeModel(x.shape[1])
     optimiser = torch.optim.Adam(model.parameters(), lr=3e-4)
-    done = 0
+    done, window = 0, []
     while done < updates:
         for batch in torch.randperm(len(x)).split(BATCH_ROWS):
             loss = nn.functional.huber_loss(model(x[batch], now[batch])[0], target[batch],
@@ -191,6 +235,11 @@ def fit_network(x: torch.Tensor, now: torch.Tensor, target: torch.Tensor, update
             loss.backward()
             optimiser.step()
             done += 1
+            if history is not None:
+                window.append(loss.item())
+                if done % HISTORY_EVERY == 0 or done == updates:
+                    history.append({"update": done, "huber_loss": sum(window) / len(window)})
+                    window = []
             if done == updates:
                 break
     return model.eval()

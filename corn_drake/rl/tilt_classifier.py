@@ -9,12 +9,7 @@ that did not tip (the simulator's own verdict) earned ~0.09 per primitive where 
 earned ~0.01. This classifier is the learned stand-in for that verdict.
 
 Its inputs are object-relative, so that what it learns of a box's proportions carries to other
-objects: per candidate, in the push's frame (its motion's heading turned to +x), the aim
-point's height over the box's bottom as a fraction of the box's height; the box's height,
-length and width (decimetres); its height over its length; the aim point's offset from the
-box's centre along and across the push in half-lengths; the surface normal; the motion's
-horizontal length and its vertical part; how far the motion goes into the surface (minus its
-dot product with the normal); and the episode's physics.
+objects: rl/outcome_model.box_contact_features (an outcome model can take them too).
 """
 
 from __future__ import annotations
@@ -23,7 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.rl.outcome_model import BATCH_ROWS, SCALE, Candidates, push_frames
+from corn_drake.rl.outcome_model import BATCH_ROWS, Candidates, box_contact_features
 from corn_drake.transforms import quat_wxyz_to_matrix
 
 TILT_DEG = 20.0  # the up direction turned further than this: the object tipped or rolled
@@ -37,26 +32,6 @@ def up_turn_deg(before_wxyz: np.ndarray, after_wxyz: np.ndarray) -> np.ndarray:
     up_after = np.stack([quat_wxyz_to_matrix(q)[2] for q in after_wxyz])
     cos = np.einsum("ri,ri->r", up, up_after)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
-def box_contact_features(c: Candidates) -> torch.Tensor:
-    """(R, 13 + physics) the module docstring's features of every candidate."""
-    frames = push_frames(c.motion)
-
-    def turn(v):
-        return np.einsum("rij,r...j->r...i", frames, v)
-
-    corners, aim, normal, motion = turn(c.keypoints), turn(c.aim), turn(c.normal), turn(c.motion)
-    low, high = corners.min(1), corners.max(1)
-    size, centre = high - low, (high + low) / 2
-    length, width, height = size[:, 0], size[:, 1], size[:, 2]
-    features = [(aim[:, 2] - low[:, 2]) / height, height * SCALE, length * SCALE,
-                width * SCALE, height / length, (aim[:, 0] - centre[:, 0]) / (length / 2),
-                (aim[:, 1] - centre[:, 1]) / (width / 2), *normal.T,
-                np.linalg.norm(motion[:, :2], axis=1), motion[:, 2],
-                -(c.motion * c.normal).sum(1)]
-    return torch.as_tensor(np.concatenate([np.stack(features, 1), c.physics], 1),
-                           dtype=torch.float32)
 
 
 class TiltClassifier(nn.Module):

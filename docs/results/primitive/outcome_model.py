@@ -24,9 +24,11 @@ outcome_model.pt, `chooser: outcome_model`, and `--task` / `--set` applied to it
 `corn-drake evaluate` applies them); `--members N` fits N models (seeds S..S+N-1 for `--seed S`,
 0 by default; the first the model a plain fit gives) for `outcome.pessimism`, `--tilt` a tilt
 classifier (rl/tilt_classifier.py) for `outcome.tilt_veto` and `outcome.tilt_blend` (with the
-mean reward its data measured for the candidates that tipped or rolled). Data:
-`lookahead_distill.py collect` folders whose states hold their outcomes. Everything is written
-atomically.
+mean reward its data measured for the candidates that tipped or rolled), `--objects N` fits on
+the first N objects of one fixed order only (item 40's learning curve over objects). The file
+keeps the first member's learning curve (`fit_history`), which `corn-drake ship` writes to the
+shipped folder's training_history.json. Data: `lookahead_distill.py collect` folders whose
+states hold their outcomes. Everything is written atomically.
 """
 
 from __future__ import annotations
@@ -45,9 +47,10 @@ from distill_scaling import (BATCH_ROWS, held_out_objects, load_study_data,  # n
 from corn_drake.rl.lookahead_distill import choice_quality, fit_critic, scores_quality  # noqa: E402
 from corn_drake.rl.outcome_chooser import OutcomeChooser  # noqa: E402
 from corn_drake.rl.outcome_file import save_outcome_model  # noqa: E402
-from corn_drake.rl.outcome_model import (OUTCOME_KEYS, OUTCOME_ROW_KEYS,  # noqa: E402
-                                         SCALE, OutcomeModel, data_after, data_candidates,
-                                         fit_model, model_inputs, predicted_rewards)
+from corn_drake.rl.outcome_model import (INPUT_KINDS, OUTCOME_KEYS,  # noqa: E402
+                                         OUTCOME_ROW_KEYS, SCALE, OutcomeModel, data_after,
+                                         data_candidates, fit_model, model_inputs,
+                                         predicted_rewards)
 from corn_drake.rl.outcome_run import outcome_run_config, write_outcome_run  # noqa: E402
 from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
 from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
@@ -108,6 +111,22 @@ def study(args) -> None:
               flush=True)
 
 
+def first_objects(data: dict, folders: list[Path], count: int) -> dict:
+    """The states of the first `count` objects of `data` (load_study_data's of `folders`) in
+    one fixed seeded order, so that a smaller count's objects are among a larger's (a learning
+    curve over objects), or SystemExit. An object is its folder and its id: libraries of other
+    seeds reuse the ids ("block_000")."""
+    files = sorted(f for folder in folders for f in folder.glob("episodes_*.npz"))  # as loaded
+    ids = np.concatenate([[f"{folders.index(Path(f).parent)}:{o}" for o in np.load(f)["object"]]
+                          for f in files])
+    assert len(ids) == len(data["object"])
+    objects = sorted(set(ids))
+    if not 1 <= count <= len(objects):
+        raise SystemExit(f"--objects {count}: the data have {len(objects)} objects")
+    kept = np.random.default_rng(0).permutation(objects)[:count]
+    return select_states(data, np.flatnonzero(np.isin(ids, kept)))
+
+
 def fit(args) -> None:
     if args.out is None and args.out_run is None:
         raise SystemExit("outcome_model.py fit: give --out (a model file) and/or --out-run (a run "
@@ -119,9 +138,13 @@ def fit(args) -> None:
     if args.members < 1:
         raise SystemExit(f"outcome_model.py fit: --members {args.members}: must be >= 1")
     data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
+    if args.objects is not None:
+        data = first_objects(data, args.data, args.objects)
     facts = {"states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
              "data": [str(d) for d in args.data], "updates": args.updates,
-             "seed": args.seed, "proposing_run": str(args.run)}
+             "seed": args.seed, "proposing_run": str(args.run), "input_kind": args.inputs}
+    if args.objects is not None:
+        facts["objects"] = args.objects
     tilt = None
     if args.tilt:  # checked before any fit: data without a tilt give a classifier nothing
         tilted = data_tilted(data)
@@ -132,8 +155,11 @@ def fit(args) -> None:
                                    args.updates, args.seed)
         facts["tilted_reward"] = float(data["reward"][tilted].mean())  # for outcome.tilt_blend
     # Member k is fitted with seed S + k: member 0 is the model a fit without --members gives.
-    model, *members = [fit_model(data, args.tokens, args.updates, args.seed + k)
+    history = []  # the first member's learning curve: the shipped folder's training history
+    model, *members = [fit_model(data, args.tokens, args.updates, args.seed + k,
+                                 history if k == 0 else None, args.inputs)
                        for k in range(args.members)]
+    facts["fit_history"] = history
     if run_cfg is not None:  # the run's outcome.* settings must suit the file (one line if not)
         OutcomeChooser([model, *members], args.tokens, facts, tilt).use(run_cfg.outcome)
     if args.out is not None:
@@ -161,12 +187,18 @@ def main() -> None:
         parser.add_argument("--data", type=Path, nargs="+", required=True)
         parser.add_argument("--updates", type=int, default=2000)
         parser.add_argument("--tokens", action="store_true")
+        parser.add_argument("--inputs", choices=INPUT_KINDS, default="raw",
+                            help="what the model reads: the candidate's own numbers (raw) or "
+                                 "object-relative ones (box_contact; item 40)")
         parser.add_argument("--members", type=int, default=1,
                             help="models fitted (seeds S..S+N-1): an ensemble for "
                                  "outcome.pessimism")
         parser.add_argument("--seed", type=int, default=0,
                             help="S, the first member's seed (how far one fit lands from "
                                  "another on the same data)")
+        parser.add_argument("--objects", type=int, default=None,
+                            help="fit on the states of this many objects only (the first of "
+                                 "one fixed order: a learning curve over objects)")
         parser.add_argument("--tilt", action="store_true",
                             help="fit a tilt classifier too (for outcome.tilt_veto and "
                                  "outcome.tilt_blend)")

@@ -189,6 +189,16 @@ def analytic_prediction(moved_push, yaw, now):
         displacement, rotation
 
 
+def held_out_prediction(features, now, target, train, test, updates: int, seed: int):
+    """(the prediction for rows `test`, its mean keypoint error in metres) of an outcome model
+    fitted on rows `train` of `features` (fit_network, `updates` updates, `seed`)."""
+    model = fit_network(features[train], now[train], target[train], updates, seed)
+    with torch.no_grad():
+        prediction = model(features[test], now[test])
+    error = np.linalg.norm(prediction[0].numpy() - target[test].numpy(), axis=2).mean() / SCALE
+    return prediction, float(error)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", help="the primitive run whose task and progress reward score")
@@ -261,11 +271,8 @@ def main() -> None:
         rewards = {"analytic": analytic_rewards[test]}
         held_c = data_candidates(held_out)  # its rows are `test`, in the same order
         for name, features in inputs.items():
-            model = fit_network(features[train], now[train], target[train], args.updates, split)
-            with torch.no_grad():
-                prediction = model(features[test], now[test])
-            row["keypoint_error_m"][name] = float(np.linalg.norm(
-                prediction[0].numpy() - target[test].numpy(), axis=2).mean() / SCALE)
+            prediction, row["keypoint_error_m"][name] = held_out_prediction(
+                features, now, target, train, test, args.updates, split)
             rewards[name] = predicted_rewards(held_c, frames[test], prediction, task, progress)
         for name, r in rewards.items():
             row["chosen"][name] = scores_quality(r, held_out)["chosen"]
