@@ -85,10 +85,14 @@ def study_arguments(description: str) -> argparse.ArgumentParser:
 
 
 def load_study_data(folders: list[Path], holdout_objects: int,
-                    needed: tuple[str, ...] = ()) -> tuple[dict, list[str]]:
-    """(the folders' data, their objects), or SystemExit naming what is missing."""
+                    needed: tuple[str, ...] = (), tag_folders: bool = False
+                    ) -> tuple[dict, list[str]]:
+    """(the folders' data, their objects), or SystemExit naming what is missing. With
+    `tag_folders` each object id is prefixed by its folder's position ("1:block_000"):
+    libraries of other seeds reuse the ids."""
     files = sorted(f for folder in folders for f in folder.glob("episodes_*.npz"))
-    data = load_data(files) if files else {}
+    tags = [f"{folders.index(f.parent)}:" for f in files] if tag_folders else None
+    data = load_data(files, tags) if files else {}
     missing = [k for k in ("object", *needed) if k not in data]
     if missing:
         raise SystemExit(f"--data {' '.join(map(str, folders))}: no episodes_*.npz files, or "

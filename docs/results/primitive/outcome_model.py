@@ -111,20 +111,15 @@ def study(args) -> None:
               flush=True)
 
 
-def first_objects(data: dict, folders: list[Path], count: int) -> dict:
-    """The states of the first `count` objects of `data` (load_study_data's of `folders`) in
+def first_objects(data: dict, count: int) -> dict:
+    """The states of the first `count` objects of `data` (load_study_data's, folders tagged) in
     one fixed seeded order, so that a smaller count's objects are among a larger's (a learning
-    curve over objects), or SystemExit. An object is its folder and its id: libraries of other
-    seeds reuse the ids ("block_000")."""
-    files = sorted(f for folder in folders for f in folder.glob("episodes_*.npz"))  # as loaded
-    ids = np.concatenate([[f"{folders.index(Path(f).parent)}:{o}" for o in np.load(f)["object"]]
-                          for f in files])
-    assert len(ids) == len(data["object"])
-    objects = sorted(set(ids))
+    curve over objects), or SystemExit."""
+    objects = sorted(set(data["object"]))
     if not 1 <= count <= len(objects):
         raise SystemExit(f"--objects {count}: the data have {len(objects)} objects")
     kept = np.random.default_rng(0).permutation(objects)[:count]
-    return select_states(data, np.flatnonzero(np.isin(ids, kept)))
+    return select_states(data, np.flatnonzero(np.isin(data["object"], kept)))
 
 
 def fit(args) -> None:
@@ -137,9 +132,9 @@ def fit(args) -> None:
     run_cfg = outcome_run_config(args.run, args.task, args.set) if args.out_run else None
     if args.members < 1:
         raise SystemExit(f"outcome_model.py fit: --members {args.members}: must be >= 1")
-    data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS)
+    data, _ = load_study_data(args.data, 0, OUTCOME_KEYS + OUTCOME_ROW_KEYS, tag_folders=True)
     if args.objects is not None:
-        data = first_objects(data, args.data, args.objects)
+        data = first_objects(data, args.objects)
     facts = {"states": int(len(data["features_tokens"])), "rows": int(len(data["reward"])),
              "data": [str(d) for d in args.data], "updates": args.updates,
              "seed": args.seed, "proposing_run": str(args.run), "input_kind": args.inputs}
