@@ -15,8 +15,8 @@ from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import run_episode
 from corn_drake.nn.attention import patch_scores
 from corn_drake.nn.encoder_files import make_policy_encoder
-from corn_drake.rl.agent import TeacherAgent
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.ppo.agent import TeacherAgent
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.viz.attention_view import step_path, viridis_rgb
 from tests.recordings import attention_in_recording
 

@@ -12,7 +12,7 @@ import pytest
 
 from corn_drake.bench import cores
 from corn_drake.cli import main
-from corn_drake.rl.core_pinning import worker_core
+from corn_drake.rl.workers.core_pinning import worker_core
 
 ENVS, STEPS, SEGMENTS = 1, 4, 2
 

@@ -14,7 +14,7 @@ from corn_drake.bench import scale
 from corn_drake.cli import main
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
-from corn_drake.rl.trainer import Trainer, to_cpu
+from corn_drake.rl.ppo.trainer import Trainer, to_cpu
 from tests.waiting import wait_until
 
 WORKERS, ENVS_PER_WORKER, ROLLOUT, UPDATES = [1, 2], 1, 4, 1
@@ -172,7 +172,7 @@ def test_a_run_resumes_on_another_device_with_the_same_policy(tmp_path, capsys, 
     change on a resume, and the run's agent rebuilt on the device acts exactly as the saved
     agent loaded on the CPU."""
     from corn_drake.contract import ACTION_DIM, observation_shapes
-    from corn_drake.rl.agent import TeacherAgent
+    from corn_drake.rl.ppo.agent import TeacherAgent
     from corn_drake.run_folders.config_file import load_run_config
 
     run = tmp_path / "run"

@@ -247,7 +247,7 @@ def _port_sizes(system, kind: str) -> dict[str, int]:
 
 
 def test_teacher_systems_and_env_follow_the_contract():
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
     from corn_drake.systems.policy import PolicySystem
 
     env = TeacherEnv()
@@ -288,7 +288,7 @@ def test_student_observations_follow_the_contract():
 def test_networks_take_the_contract_sizes(kind):
     import torch
 
-    from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+    from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
     from corn_drake.rl.pretrained_encoders import make_encoder
 
     agent = TeacherAgent(kind, make_encoder(kind))

@@ -1,4 +1,4 @@
-"""Pinning rollout workers to cores (rl/core_pinning.py, `pin_workers`): which core worker w
+"""Pinning rollout workers to cores (rl/workers/core_pinning.py, `pin_workers`): which core worker w
 gets, that a pinned process really runs on that core alone, and that every kind of Ray worker
 (PPO segments, primitives, lock-step envs) is pinned when the run asks, a replaced one too."""
 
@@ -12,8 +12,8 @@ import pytest
 
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import TrainConfig
-from corn_drake.rl.core_pinning import pin_process, pin_worker, worker_core
-from corn_drake.rl.vec_env import EnvFactory
+from corn_drake.rl.workers.core_pinning import pin_process, pin_worker, worker_core
+from corn_drake.rl.envs.vec_env import EnvFactory
 
 ray = pytest.importorskip("ray")
 
@@ -54,7 +54,7 @@ def test_a_pinned_process_runs_on_its_core_alone():
 
 @pytest.fixture(scope="module")
 def local_ray():
-    from corn_drake.rl.ray_workers import init_ray
+    from corn_drake.rl.workers.ray_workers import init_ray
 
     init_ray(num_cpus=2)
     yield
@@ -67,7 +67,7 @@ def _affinities(pids):
 
 def test_segment_workers_are_pinned_and_a_replacement_takes_the_dead_ones_core(tmp_path,
                                                                                 local_ray):
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.rl.ppo.trainer import Trainer
 
     def cfg(pin):
         return TrainConfig(policy="state", workers=2, envs_per_worker=1, rollout_steps=2,
@@ -89,8 +89,8 @@ def test_primitive_and_lock_step_workers_are_pinned_when_asked(tmp_path, local_r
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.package_data import data_dir
-    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
-    from corn_drake.rl.ray_workers import RayEnvBatch
+    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.workers.ray_workers import RayEnvBatch
 
     expected = [[worker_core(0)], [worker_core(1)]]
     cfg = PrimitiveTrainConfig(env=load_primitive_env_config("push"), workers=2,

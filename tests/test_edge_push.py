@@ -8,7 +8,7 @@ import pytest
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.scene import ControllerConfig
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.systems.edge_push import push_kept_on_table
 from corn_drake.systems.primitive_executor import _PUSH, PrimitivePlanner, make_primitive
 

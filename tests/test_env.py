@@ -6,7 +6,7 @@ import pytest
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.loader import load_config
 from corn_drake.errors import InputError
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.scene.objects import ObjectSpec, box_spec
 from corn_drake.config.task import PlanarGoal, PushFromHandGoal
 

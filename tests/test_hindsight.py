@@ -1,4 +1,4 @@
-"""Hindsight goals for the primitive learner (rl/hindsight.py, nn/primitive_features.with_goal):
+"""Hindsight goals for the primitive learner (rl/primitive/hindsight.py, nn/primitive_features.with_goal):
 features rewritten for another goal equal the features of an observation with that goal; the
 relabelled reward of the episode's own goal is PrimitiveEnv's reward (an independent
 computation: the env's from the plant's pose and the object's corners or body cloud; the cloud
@@ -14,10 +14,10 @@ from corn_drake.config.primitive import PrimitiveConfig, PrimitiveTrainConfig
 from corn_drake.errors import InputError
 from corn_drake.nn.primitive_features import location_features, with_goal
 from corn_drake.package_data import data_dir
-from corn_drake.rl.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
+from corn_drake.rl.primitive.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
                                      relative_goal, reward, succeeded)
 from corn_drake.rl.pretrained_encoders import load_encoder
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.transforms import from_pose9, pose9
 
 ENCODER = data_dir("models") / "weights" / "push_corn" / "encoder.pt"
@@ -146,8 +146,8 @@ def _cfg(**changes) -> PrimitiveTrainConfig:
 
 
 def test_a_finished_episode_comes_back_with_its_reached_poses_as_goals(tmp_path):
-    from corn_drake.rl.primitive_collection import Exploration
-    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+    from corn_drake.rl.primitive.collection import Exploration
+    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
 
     trainer = PrimitiveTrainer(_cfg(), tmp_path, load_encoder("corn", ENCODER))
     explore = Exploration(random=True, temperature=0.1, motion_noise=0.3)
@@ -181,7 +181,7 @@ def test_a_finished_episode_comes_back_with_its_reached_poses_as_goals(tmp_path)
 
 
 def test_a_hindsight_run_stores_the_copies_and_counts_only_its_primitives(tmp_path):
-    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
 
     trainer = PrimitiveTrainer(_cfg(), tmp_path, load_encoder("corn", ENCODER))
     metrics = trainer.train(progress=False)
@@ -197,8 +197,8 @@ def test_an_at_rest_runs_collector_relabels_with_the_final_speeds(tmp_path):
     success_at_rest and hindsight goals collects, and the copies of each episode's last push
     (whose only goal is the pose it led to) are one copy three times: all of them succeed or
     none, as that push's one final speed decides (a missing speed would be refused)."""
-    from corn_drake.rl.primitive_collection import Exploration
-    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+    from corn_drake.rl.primitive.collection import Exploration
+    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
 
     cfg = _cfg(primitive=PrimitiveConfig(max_primitives=2, success_at_rest=True))
     trainer = PrimitiveTrainer(cfg, tmp_path, load_encoder("corn", ENCODER))

@@ -55,7 +55,7 @@ def test_a_signalled_training_run_ends_in_one_line_and_resumes(tmp_path, sig, wo
     # (in process and without Ray: the command would train on to its million steps).
     import dataclasses
 
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.rl.ppo.trainer import Trainer
     from corn_drake.run_folders.config_file import load_run_config
 
     cfg = dataclasses.replace(load_run_config(run), total_steps=kept + 32, workers=0)
@@ -110,7 +110,7 @@ def test_train_refuses_a_folder_that_is_not_a_run(tmp_path):
 def test_a_broken_library_object_is_named_before_training_writes(tmp_path, field, value, message):
     import json
 
-    from corn_drake.rl.vec_env import library_train_ids
+    from corn_drake.rl.envs.vec_env import library_train_ids
     from corn_drake.errors import InputError
     from tests.fixtures import write_loadable_library
 
@@ -128,7 +128,7 @@ def test_a_missing_hull_file_is_named_before_training_writes(tmp_path):
     import json
 
     from corn_drake.errors import InputError
-    from corn_drake.rl.vec_env import library_train_ids
+    from corn_drake.rl.envs.vec_env import library_train_ids
     from tests.fixtures import write_loadable_library
 
     library = write_loadable_library(tmp_path / "lib", num_train=3)

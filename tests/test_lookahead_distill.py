@@ -11,14 +11,14 @@ import torch
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
-from corn_drake.rl.lookahead_distill import (choice_quality, collect_episode, critic_error,
+from corn_drake.rl.primitive.outcome.lookahead_distill import (choice_quality, collect_episode, critic_error,
                                              fit_actor, fit_critic, scores_quality, stack_states)
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
 
 def _agent():
     from corn_drake.nn.encoder_files import make_policy_encoder
-    from corn_drake.rl.primitive_agent import PrimitiveAgent
+    from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(0)
     return PrimitiveAgent(make_policy_encoder("corn"), "patch").eval()

@@ -135,7 +135,7 @@ def _push_tall_box(primitive: PrimitiveConfig) -> tuple[bool, float, float]:
     (0.7 x push_distance: ~6.5 cm past the surface), horizontally: (reached, how far the box
     moved in xy, how far its up axis tilted, rad)."""
     from corn_drake.config.diagram_files import load_primitive_env_config
-    from corn_drake.rl.primitive_env import PrimitiveEnv
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
     from corn_drake.transforms import quat_wxyz_to_matrix, up_angle
 
     cfg = load_primitive_env_config("push")

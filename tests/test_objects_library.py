@@ -15,7 +15,7 @@ from corn_drake.assets.manifest import write_manifest
 from corn_drake.assets.process import ProcessConfig
 from corn_drake.config.scene import SceneConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 

@@ -1,4 +1,4 @@
-"""The outcome model (rl/outcome_model.py) and the choice made by it (rl/outcome_chooser.py): the
+"""The outcome model (rl/primitive/outcome/model.py) and the choice made by it (rl/primitive/outcome/chooser.py): the
 reward it predicts for a known outcome is the env's own rule's, a fit learns a push's effect, the
 chooser's push frames come back to the world (a model that says "every push carries the object
 along it" pushes toward the goal), and bad model files are refused by name."""
@@ -11,8 +11,8 @@ import torch
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError, MissingInputError
-from corn_drake.rl.outcome_file import load_outcome_parts, save_outcome_model
-from corn_drake.rl.outcome_model import (SCALE, Candidates, OutcomeModel, data_after,
+from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts, save_outcome_model
+from corn_drake.rl.primitive.outcome.model import (SCALE, Candidates, OutcomeModel, data_after,
                                          data_candidates, fit_model, model_inputs,
                                          predicted_rewards)
 from corn_drake.systems.reward import keypoints_at, pose_errors, within_tolerance
@@ -68,7 +68,7 @@ def test_the_predicted_reward_of_a_known_outcome_is_the_envs_rule(case):
     pg = p1 + (np.array([0.01, -0.01, 0.0]) if near else np.array([*rng.uniform(-0.2, 0.2, 2),
                                                                      0.0]))
     motion = rng.uniform(-1, 1, (1, 3))
-    from corn_drake.rl.outcome_model import push_frames
+    from corn_drake.rl.primitive.outcome.model import push_frames
 
     F = push_frames(motion)[0]
     d_world = (p1 - p0) * np.array([1.0, 1.0, 0.0])
@@ -135,7 +135,7 @@ def test_a_fit_records_its_learning_curve_without_changing_its_weights():
     """The history a shipped outcome folder's training_history.json holds: a row every
     HISTORY_EVERY updates and one at the last, the loss falling on data it can learn, and the
     weights bit for bit those of a fit that records nothing (the shipped model refits exactly)."""
-    from corn_drake.rl.outcome_model import HISTORY_EVERY
+    from corn_drake.rl.primitive.outcome.model import HISTORY_EVERY
 
     data = _synthetic_data(32, np.random.default_rng(1))
     updates = 2 * HISTORY_EVERY + 30
@@ -152,9 +152,9 @@ def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
     """The chooser's push frames back in the world: told that every push carries the object
     5 cm along its own heading, it chooses a motion heading for the goal (5 cm away in +y)."""
     from corn_drake.nn.encoder_files import make_policy_encoder
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.primitive_agent import PrimitiveAgent
-    from corn_drake.rl.primitive_env import PrimitiveEnv
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.agent import PrimitiveAgent
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
     torch.manual_seed(0)
     agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
@@ -181,9 +181,9 @@ def test_the_model_is_told_the_push_as_executed_with_less_vertical_push():
     import dataclasses
 
     from corn_drake.nn.encoder_files import make_policy_encoder
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.primitive_agent import PrimitiveAgent
-    from corn_drake.rl.primitive_env import PrimitiveEnv
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.agent import PrimitiveAgent
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
     torch.manual_seed(0)
     agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
@@ -227,8 +227,8 @@ def test_a_model_of_object_relative_inputs_learns_pushes_and_its_file_says_what_
     same features (its scores are the model's own predicted rewards); an unknown kind is refused
     by name, and a file from before kinds were recorded reads as "raw"."""
     from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.outcome_model import INPUT_KINDS, box_contact_features
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.outcome.model import INPUT_KINDS, box_contact_features
 
     data = _synthetic_data(64, np.random.default_rng(2))
     model = fit_model(data, tokens=False, updates=600, seed=0, kind="box_contact")
@@ -294,7 +294,7 @@ def test_pessimism_prefers_the_candidate_the_members_agree_on():
     away; candidate 1: both say 3 cm toward. The mean takes the promise (0.35 > 0.30 of
     progress), one deviation of pessimism the agreement; one model scores as before."""
     from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
 
     task, progress = load_primitive_env_config("push").task, 10.0
     c = _pushes_along_x([0.0, 0.0])
@@ -324,8 +324,8 @@ def test_a_fitted_tilt_classifier_vetoes_the_pushes_it_expects_to_tip():
     separates the two, and the veto then passes over a high push the model prefers, unless
     every candidate is high."""
     from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.tilt_classifier import box_contact_features, fit_tilt_classifier
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.outcome.tilt_classifier import box_contact_features, fit_tilt_classifier
 
     heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
     c = _pushes_along_x(heights)
@@ -352,8 +352,8 @@ def test_the_tilt_blend_weighs_each_reward_by_the_classifiers_tilt_probability()
     model's reward + p x the reward the file's data measured for tilts, so the high push the
     model prefers (1.0 against 0.3) loses to the low one, and no candidate is left out."""
     from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.tilt_classifier import box_contact_features, fit_tilt_classifier
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.outcome.tilt_classifier import box_contact_features, fit_tilt_classifier
 
     heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
     train = _pushes_along_x(heights)
@@ -379,7 +379,7 @@ def test_the_tilt_blend_weighs_each_reward_by_the_classifiers_tilt_probability()
 
 
 def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
-    from corn_drake.rl.tilt_classifier import TiltClassifier
+    from corn_drake.rl.primitive.outcome.tilt_classifier import TiltClassifier
 
     torch.manual_seed(0)
     models = [OutcomeModel(INPUTS) for _ in range(3)]

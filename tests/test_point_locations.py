@@ -13,7 +13,7 @@ from corn_drake.nn.patchify import farthest_point_sample
 from corn_drake.nn.primitive_features import location_features, point_candidates
 from corn_drake.package_data import data_dir
 from corn_drake.rl.pretrained_encoders import load_encoder
-from corn_drake.rl.primitive_agent import PrimitiveAgent
+from corn_drake.rl.primitive.agent import PrimitiveAgent
 from corn_drake.transforms import pose9
 
 ENCODER = data_dir("models") / "weights" / "push_corn" / "encoder.pt"

@@ -6,8 +6,8 @@ import torch
 
 from corn_drake.contract import ACTION_DIM
 from corn_drake.evaluation.episodes import run_episode
-from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 
 
 def test_policy_system_matches_training_path_and_runs_closed_loop():

@@ -8,7 +8,7 @@ from corn_drake.errors import InputError
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic
 from corn_drake.rl.normalization import RewardScaler, RunningMeanStd
 from corn_drake.config.training import PPOConfig
-from corn_drake.rl.ppo import PPO, compute_gae, sample_actions
+from corn_drake.rl.ppo.ppo import PPO, compute_gae, sample_actions
 
 
 class _FlatPolicy(nn.Module):
@@ -123,7 +123,7 @@ def test_the_agent_normalises_its_context_with_the_one_running_mean_std():
     everything it saw, they travel in the agent's state_dict, and a loaded agent normalises
     the same way."""
     from corn_drake.contract import CONTEXT_DIM
-    from corn_drake.rl.agent import TeacherAgent
+    from corn_drake.rl.ppo.agent import TeacherAgent
 
     torch.manual_seed(0)
     agent = TeacherAgent("state")

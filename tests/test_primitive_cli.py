@@ -14,8 +14,8 @@ import pytest
 
 from corn_drake.cli import main
 from corn_drake.package_data import data_dir
-from corn_drake.rl.primitive_trainer import PrimitiveTrainer
-from corn_drake.rl.replay import ReplayBuffer
+from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+from corn_drake.rl.primitive.replay import ReplayBuffer
 from corn_drake.storage.checkpoint_files import load_checkpoint
 from tests.fixtures import one_error_line
 
@@ -230,8 +230,8 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
 
     import torch
 
-    from corn_drake.rl.outcome_model import MODEL_FILE, OutcomeModel
-    from corn_drake.rl.outcome_run import outcome_run_config, write_outcome_run
+    from corn_drake.rl.primitive.outcome.model import MODEL_FILE, OutcomeModel
+    from corn_drake.rl.primitive.outcome.run_folder import outcome_run_config, write_outcome_run
 
     run, library, critic_report, shipped_folder, _ = shipped
     torch.manual_seed(1)
@@ -253,7 +253,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
     assert "fit_history" not in report["outcome_model"]  # the curve goes to the shipped folder
     assert not report.get("overrides")  # the run's own settings (3 primitives) are its config's
 
-    from corn_drake.rl.primitive_agent import load_primitive_run
+    from corn_drake.rl.primitive.agent import load_primitive_run
 
     # Shipped alone its folder holds a copy of the actor and critic; beside the shipped folder
     # of the run that proposes its motions, it names that folder instead.
@@ -291,7 +291,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
 
     # An ensemble with a tilt classifier chooses as evaluate's --set outcome.* says; a single
     # model refuses pessimism in one line.
-    from corn_drake.rl.tilt_classifier import TiltClassifier
+    from corn_drake.rl.primitive.outcome.tilt_classifier import TiltClassifier
 
     ensemble = tmp_path / "runs" / "ensemble"
     write_outcome_run(run, outcome_run_config(run, None, ["primitive.max_primitives=3"]),

@@ -17,8 +17,8 @@ from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.scene import ControllerConfig
 from corn_drake.contract import ACTION_SLICES
 from corn_drake.errors import InputError
-from corn_drake.rl.env import DiagramEnv
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.envs.teacher_env import DiagramEnv
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.scene.objects import TABLE_TOP_Z
 from corn_drake.systems.primitive_executor import (DESCEND, IDLE, PUSH, RETREAT, SETTLE,
                                                    STATUS_LAYOUT, PrimitivePlanner,
@@ -401,7 +401,7 @@ def test_a_primitive_into_the_table_leaves_the_object_where_it_was():
 
 def _agent(seed: int = 0, locations: str = "patch"):
     from corn_drake.nn.encoder_files import make_policy_encoder
-    from corn_drake.rl.primitive_agent import PrimitiveAgent
+    from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(seed)
     return PrimitiveAgent(make_policy_encoder("corn"), locations).eval()
@@ -424,8 +424,8 @@ def _step_until_count(env: PrimitiveEnv, count: int, max_ticks: int = 80) -> dic
 
 def _choosing_by_an_outcome_model(agent, task):
     """The agent choosing by an outcome model of random weights (its output layer too)."""
-    from corn_drake.rl.outcome_chooser import OutcomeChooser
-    from corn_drake.rl.outcome_model import OutcomeModel
+    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+    from corn_drake.rl.primitive.outcome.model import OutcomeModel
 
     model = OutcomeModel(38)
     torch.nn.init.normal_(model.net[-1].weight, std=0.1)

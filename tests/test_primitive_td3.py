@@ -19,8 +19,8 @@ from corn_drake.nn.primitive_heads import (
     PrimitiveCritic,
     location_features_dims,
 )
-from corn_drake.rl.replay import ReplayBuffer
-from corn_drake.rl.td3 import TD3Learner, TD3Settings
+from corn_drake.rl.primitive.replay import ReplayBuffer
+from corn_drake.rl.primitive.td3 import TD3Learner, TD3Settings
 
 L, D, K, G = 4, 8, 3, 5
 GOOD_LOCATION = 2

@@ -1,4 +1,4 @@
-"""Ray workers that collect contact primitives on their own envs (rl/primitive_workers.py): the
+"""Ray workers that collect contact primitives on their own envs (rl/workers/primitive_workers.py): the
 same transitions as the in-process collector for the same envs, weights and random stream, the
 weights the learner last published, a killed worker replaced, and a whole `--workers` run that
 trains, checkpoints and resumes."""
@@ -14,9 +14,9 @@ from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.package_data import data_dir
 from corn_drake.rl.pretrained_encoders import load_encoder
-from corn_drake.rl.primitive_collection import Exploration, PrimitiveCollector
-from corn_drake.rl.primitive_trainer import PrimitiveTrainer
-from corn_drake.rl.vec_env import EnvBatch
+from corn_drake.rl.primitive.collection import Exploration, PrimitiveCollector
+from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+from corn_drake.rl.envs.vec_env import EnvBatch
 from tests.waiting import wait_until
 
 ray = pytest.importorskip("ray")
@@ -37,7 +37,7 @@ def _trainer(tmp_path, workers: int, steps: int = 8) -> PrimitiveTrainer:
 
 @pytest.fixture(scope="module")
 def local_ray():
-    from corn_drake.rl.ray_workers import init_ray
+    from corn_drake.rl.workers.ray_workers import init_ray
 
     init_ray(num_cpus=2)
     yield

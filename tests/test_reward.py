@@ -96,7 +96,7 @@ def test_keypoint_potential_sees_rotation_but_not_height():
 
 
 def test_hold_in_the_teacher_diagram_latches_the_previous_policy_step():
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     env = TeacherEnv()
     env.reset(seed=0)
@@ -126,7 +126,7 @@ def test_energy_meter_is_built_only_when_the_task_pays_for_energy():
     multiplied by zero), and the reward is the same as with a meter and coefficient 0."""
     from corn_drake.builders.teacher import build_teacher_diagram
     from corn_drake.config.diagram_files import load_teacher_config
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     def names(cfg):
         return {s.get_name() for s in build_teacher_diagram(cfg).diagram.GetSystems()}

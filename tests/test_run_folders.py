@@ -79,7 +79,7 @@ def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_st
 # --- item 11: a corrupt latest checkpoint falls back to the previous one ----------------------
 def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
         state_run, tmp_path, capsys):
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.rl.ppo.trainer import Trainer
 
     run = tmp_path / "run"
     shutil.copytree(state_run, run)
@@ -280,7 +280,7 @@ def test_evaluate_a_library_trained_run_over_the_requested_split(tmp_path):
 # --- item 16: a killed driver's local Ray ends with it ----------------------------------------
 DRIVER = """
 import ray
-from corn_drake.rl.ray_workers import init_ray
+from corn_drake.rl.workers.ray_workers import init_ray
 init_ray(num_cpus=1)
 @ray.remote(num_cpus=0)
 def pid():

@@ -71,7 +71,7 @@ def test_bad_friction_is_named():
 
 
 def test_env_observes_the_sampled_frictions_and_simulates_their_average():
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     env = TeacherEnv()
     obs, _ = env.reset(seed=4)

@@ -9,7 +9,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from corn_drake.config.scene import SceneConfig
 from corn_drake.evaluation.episodes import run_episode
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.rl.scripted import ScriptedPushAgent
 from corn_drake.scene.builder import build_scene
 from corn_drake.scene.objects import box_spec, cylinder_spec

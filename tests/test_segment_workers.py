@@ -1,4 +1,4 @@
-"""Ray workers that step their own envs for whole rollout segments (rl/segment_workers.py): the
+"""Ray workers that step their own envs for whole rollout segments (rl/workers/segment_workers.py): the
 same episodes as in-process collection, the weights of the update they collect for, and a worker
 killed mid-rollout replaced without losing the update."""
 
@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from corn_drake.config.training import TrainConfig
-from corn_drake.rl.trainer import Trainer
+from corn_drake.rl.ppo.trainer import Trainer
 from tests.waiting import wait_until
 
 ray = pytest.importorskip("ray")
@@ -29,7 +29,7 @@ def _cfg(workers: int, total_updates: int = 1, rollout: int = 8) -> TrainConfig:
 
 @pytest.fixture(scope="module")
 def local_ray():
-    from corn_drake.rl.ray_workers import init_ray
+    from corn_drake.rl.workers.ray_workers import init_ray
 
     init_ray(num_cpus=2)
     yield

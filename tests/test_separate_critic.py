@@ -9,8 +9,8 @@ import torch
 
 from corn_drake.config.training import PPOConfig
 from corn_drake.contract import observation_shapes
-from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
-from corn_drake.rl.ppo import PPO, sample_actions
+from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.ppo.ppo import PPO, sample_actions
 
 
 def _obs(n: int, seed: int = 0) -> dict[str, torch.Tensor]:

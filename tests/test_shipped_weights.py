@@ -80,7 +80,7 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
         assert (REPO / cfg.teacher / "card.json").is_file()  # distilled from a shipped teacher
         return
     if card["policy"] == "primitive":  # a contact-primitive run: its own config, steps counted
-        from corn_drake.rl.primitive_agent import load_primitive_run  # in primitives
+        from corn_drake.rl.primitive.agent import load_primitive_run  # in primitives
 
         cfg, agent, _ = load_primitive_run(folder)
         assert card["env_steps_unit"] == "primitives"

@@ -7,9 +7,9 @@ from corn_drake.contract import (ACTION_DIM, OBS_KEYS, ROBOT_STATE_DIM, STUDENT_
                                  observation_shapes)
 from corn_drake.config.diagram_files import load_student_config
 from corn_drake.errors import InputError
-from corn_drake.rl.env import TeacherEnv
-from corn_drake.rl.student_env import StudentEnv
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory, concat_obs, stack_obs
+from corn_drake.rl.envs.teacher_env import TeacherEnv
+from corn_drake.rl.envs.student_env import StudentEnv
+from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory, concat_obs, stack_obs
 
 # Observation keys the student sees without perception or noise: equal to the teacher's.
 EXACT_KEYS = ("hand_state", "robot_state", "previous_action")
@@ -187,7 +187,7 @@ def test_ray_workers_run_student_envs_as_an_in_process_batch():
     process, and returns both observation sets of the same episodes as an in-process batch
     (a worker's envs take their global index, so the seeds match)."""
     ray = pytest.importorskip("ray")
-    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
 
     cfg = _config()
     cfg.teacher.task.episode_steps = 2

@@ -18,7 +18,7 @@ from corn_drake.contract import STUDENT_OBS_KEYS
 from corn_drake.config.diagram_files import load_student_config
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.nn.student import StudentPolicy
-from corn_drake.rl.student_env import StudentEnv
+from corn_drake.rl.envs.student_env import StudentEnv
 from corn_drake.run_folders.config_file import write_run_config
 from corn_drake.systems.ik import ActionScaling
 from tests.fixtures import one_error_line

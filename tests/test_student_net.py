@@ -155,7 +155,7 @@ def test_bad_inputs_are_named(student):
 
 
 def test_token_statistics_are_taken_from_the_teachers_context_keys():
-    from corn_drake.rl.agent import obs_to_tensors
+    from corn_drake.rl.ppo.agent import obs_to_tensors
 
     # A teacher context assembled the teacher's way from known per-key values, used as the
     # statistics' mean: the student must pick out exactly its token keys' values.

@@ -13,8 +13,8 @@ import torch
 
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import TrainConfig
-from corn_drake.rl.trainer import Trainer
-from corn_drake.rl.vec_env import EnvFactory
+from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.envs.vec_env import EnvFactory
 from tests.waiting import wait_until
 
 
@@ -119,7 +119,7 @@ def test_killed_training_process_resumes_from_its_checkpoint(tmp_path):
 
 def test_ray_workers_survive_a_killed_worker():
     ray = pytest.importorskip("ray")
-    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
 
     cfg = TeacherDiagramConfig()
     init_ray(num_cpus=2)
@@ -141,7 +141,7 @@ def test_ray_workers_survive_a_killed_worker():
 
 def test_frozen_encoder_runs_once_per_observation_batch_and_never_in_the_update(tmp_path):
     from corn_drake.rl.pretrained_encoders import make_encoder
-    from corn_drake.rl.ppo import compute_gae
+    from corn_drake.rl.ppo.ppo import compute_gae
 
     cfg = TrainConfig(policy="corn", total_steps=8, envs_per_worker=2, rollout_steps=4)
     cfg.env.task.episode_steps = 3  # episodes end inside the rollout: final values are needed
@@ -174,7 +174,7 @@ def _library_config(library, episode_steps):
 
 def test_envs_move_through_every_train_object(tmp_path):
     from corn_drake.assets.library import list_objects
-    from corn_drake.rl.vec_env import EnvBatch
+    from corn_drake.rl.envs.vec_env import EnvBatch
     from tests.fixtures import write_loadable_library
 
     library = write_loadable_library(tmp_path / "lib", num_train=10)
@@ -210,7 +210,7 @@ def test_envs_move_through_every_train_object(tmp_path):
 
 
 def test_a_fixed_object_id_keeps_one_object(tmp_path):
-    from corn_drake.rl.vec_env import EnvBatch
+    from corn_drake.rl.envs.vec_env import EnvBatch
     from tests.fixtures import write_loadable_library
 
     library = write_loadable_library(tmp_path / "lib", num_train=3)
@@ -254,7 +254,7 @@ def test_train_cli_writes_episodes_per_object_for_every_train_object(tmp_path):
 
 
 def test_a_failed_simulation_step_ends_the_episode_without_bootstrap(tmp_path):
-    from corn_drake.rl.ppo import compute_gae
+    from corn_drake.rl.ppo.ppo import compute_gae
 
     trainer = Trainer(_small_cfg(64), tmp_path)
     trainer.rollouts.reset()
@@ -278,8 +278,8 @@ def test_ray_workers_share_the_object_rounds_of_an_in_process_batch(tmp_path):
     """Workers' envs take their global index and the total env count: 2 workers x 2 envs run
     the same objects and episodes as one in-process batch of 4."""
     ray = pytest.importorskip("ray")
-    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
-    from corn_drake.rl.vec_env import EnvBatch
+    from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.envs.vec_env import EnvBatch
     from tests.fixtures import write_loadable_library
 
     factory = EnvFactory(_library_config(write_loadable_library(tmp_path / "lib", 4), 1), seed=3)

@@ -19,7 +19,7 @@ update. Per count the report gives:
                              not be higher on this machine.
 
 `--pin both` (default) measures every count unpinned and pinned (process i on core i + 1 of the
-usable cores, rl/core_pinning.py), in that order, in the same run. The report's `machine` block
+usable cores, rl/workers/core_pinning.py), in that order, in the same run. The report's `machine` block
 says how many physical cores the usable CPUs are.
 """
 
@@ -85,12 +85,12 @@ def collect_paces(job: Job, index: int, count: int, pin: bool, barrier, results)
         import torch
 
         from corn_drake.config.diagram_files import load_teacher_config
-        from corn_drake.rl.agent import TeacherAgent
-        from corn_drake.rl.core_pinning import take_worker_core
+        from corn_drake.rl.ppo.agent import TeacherAgent
+        from corn_drake.rl.workers.core_pinning import take_worker_core
         from corn_drake.rl.pretrained_encoders import make_encoder
         from corn_drake.rl.run_progress import run_env_factory
-        from corn_drake.rl.segments import SegmentCollector
-        from corn_drake.rl.vec_env import EnvBatch
+        from corn_drake.rl.ppo.segments import SegmentCollector
+        from corn_drake.rl.envs.vec_env import EnvBatch
 
         core = take_worker_core(index if pin else None)  # as a segment worker takes it
         torch.manual_seed(job.seed)

@@ -59,7 +59,7 @@ def measure_libraries(base_cfg, libraries: list[str], split: str | None, steps: 
     `repeats` replays, libraries alternating); means and ratios against the first library."""
     from corn_drake.bench.episode_plans import random_action_plans
     from corn_drake.bench.bare_physics import check_replayable, record_torques, replay_bare
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     ids = common_objects(libraries, split)
     hulls = [hull_counts(library) for library in libraries]

@@ -74,7 +74,7 @@ def run(args) -> dict:
 
     env_cfg = load_teacher_config(args.task)
     if args.objects:
-        from corn_drake.rl.vec_env import library_train_ids
+        from corn_drake.rl.envs.vec_env import library_train_ids
 
         library_train_ids(args.objects)  # a library that cannot be cycled is named here
         env_cfg = on_library(TrainConfig(env=env_cfg), args.objects).env

@@ -166,13 +166,13 @@ def run(args) -> dict:
     from corn_drake.config.diagram_files import load_primitive_env_config, load_teacher_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.agent import TeacherAgent
-    from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.primitive_agent import agent_for
-    from corn_drake.rl.primitive_env import PrimitiveEnv
-    from corn_drake.rl.primitive_trainer import td3_settings
-    from corn_drake.rl.replay import ReplayBuffer
-    from corn_drake.rl.td3 import TD3Learner
+    from corn_drake.rl.ppo.agent import TeacherAgent
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
+    from corn_drake.rl.primitive.agent import agent_for
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+    from corn_drake.rl.primitive.trainer import td3_settings
+    from corn_drake.rl.primitive.replay import ReplayBuffer
+    from corn_drake.rl.primitive.td3 import TD3Learner
 
     cfg = PrimitiveTrainConfig(env=load_primitive_env_config(args.task), locations=args.locations,
                                point_locations=args.point_locations, seed=args.seed)

@@ -1,9 +1,9 @@
 """`corn-drake bench scale`: training steps/s of the Ray path at each worker count, and efficiency.
 
-For each worker count W the real trainer (corn_drake/rl/trainer.py) trains with W Ray rollout
+For each worker count W the real trainer (corn_drake/rl/ppo/trainer.py) trains with W Ray rollout
 workers of --envs-per-worker envs each (weak scaling: the batch grows with W), each worker
 stepping its own envs for the whole rollout segment with a CPU copy of the policy
-(rl/segment_workers.py), the learner's PPO update on --device, a randomly initialised encoder
+(rl/workers/segment_workers.py), the learner's PPO update on --device, a randomly initialised encoder
 (timing only). Rates are measured on the timed updates only (bench/timed_training.py).
 efficiency(W) = (steps/s at W / W) / (steps/s at 1 worker): 1.0 is perfect scale-out. The
 1-worker run is the baseline, measured even when --workers leaves it out (the report then says
@@ -70,7 +70,7 @@ def add_arguments(parser):
                         help="torch device of the learner (agent, batched inference, PPO "
                              "update): cpu, cuda or cuda:N; the envs run on the CPU")
     parser.add_argument("--pin-workers", action="store_true",
-                        help="run worker w on core w + 1 alone (rl/core_pinning.py), as "
+                        help="run worker w on core w + 1 alone (rl/workers/core_pinning.py), as "
                              "`train --pin-workers`")
 
 

@@ -83,8 +83,8 @@ def _profile_env(env, plans) -> list[str]:
 
 
 def _policy_loop(batch, agent, steps: int) -> float:
-    from corn_drake.rl.agent import obs_to_tensors
-    from corn_drake.rl.ppo import sample_actions
+    from corn_drake.rl.ppo.agent import obs_to_tensors
+    from corn_drake.rl.ppo.ppo import sample_actions
 
     obs = batch.reset()
     for _ in range(3):  # warm-up (Ray actors, first inference)
@@ -98,10 +98,10 @@ def _policy_loop(batch, agent, steps: int) -> float:
 def _policy_results(args, cfg) -> dict:
     import ray
 
-    from corn_drake.rl.agent import TeacherAgent
+    from corn_drake.rl.ppo.agent import TeacherAgent
     from corn_drake.rl.pretrained_encoders import make_encoder
-    from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
-    from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+    from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
+    from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
 
     agent = TeacherAgent(args.policy, make_encoder(args.policy))
     factory = EnvFactory(cfg, args.seed)
@@ -138,7 +138,7 @@ def physics_comparison(env, base_cfg, steps: int, seed: int, repeats: int = 2) -
     each replaying its own recording of the same action plans; the two alternate `repeats`
     times and the best of each is kept (the least disturbed by other load)."""
     from corn_drake.bench.episode_plans import random_action_plans
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     baseline = TeacherEnv(base_cfg, spec=env.scene.object_spec)
     plans = random_action_plans(env, steps, seed)
@@ -168,7 +168,7 @@ def run(args) -> dict:
     import numpy as np
 
     from corn_drake.bench.episode_plans import random_action_plans, run_plans
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     if args.objects:
         from corn_drake.bench.library_physics import measure_libraries

@@ -55,8 +55,8 @@ def measure(cfg, steps: int, seed: int = 0, repeats: int = 2) -> dict:
 
     from corn_drake.bench.episode_plans import random_action_plans, run_plans
     from corn_drake.nn.student import StudentPolicy
-    from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.student_env import StudentEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
+    from corn_drake.rl.envs.student_env import StudentEnv
 
     student_env = StudentEnv(cfg)
     spec = student_env.scene.object_spec

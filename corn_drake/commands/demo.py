@@ -69,7 +69,7 @@ def run(args) -> int:
     from corn_drake.config.diagram_files import load_teacher_config
     from corn_drake.evaluation.episodes import run_episode
     from corn_drake.package_data import data_dir
-    from corn_drake.rl.env import TeacherEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
     from corn_drake.rl.scripted import ScriptedPushAgent
 
     out = Path(args.out)
@@ -151,7 +151,7 @@ def train_teacher(run_dir: Path, library: Path, encoder: Path, args) -> None:
     from corn_drake.config.overrides import on_library
     from corn_drake.config.training import TrainConfig
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.rl.ppo.trainer import Trainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     cfg = on_library(TrainConfig(env=load_teacher_config(TASK)), str(library))

@@ -136,7 +136,7 @@ def run(args) -> int:
         teacher_cfg, teacher = load_teacher(args.teacher or recorded.teacher)
         cfg = requested_config(args, recorded, teacher_cfg)
         if cfg.env.teacher.scene.object.cycles_library:
-            from corn_drake.rl.vec_env import library_train_ids
+            from corn_drake.rl.envs.vec_env import library_train_ids
 
             library_train_ids(cfg.env.teacher.scene.object.library)  # a bad library fails here
         run_folder.refuse_changes(cfg, may_grow=RESUME_MAY_GROW, may_change=RESUME_MAY_CHANGE,

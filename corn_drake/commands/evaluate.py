@@ -176,7 +176,7 @@ def run(args) -> int:
             # run's env does.
             base, policy = TrainConfig(env=student_cfg.teacher), "student"
         elif kind == "primitive":
-            from corn_drake.rl.primitive_agent import load_primitive_run
+            from corn_drake.rl.primitive.agent import load_primitive_run
 
             base, agent, env_steps = load_primitive_run(args.run, args.checkpoint)
             policy = base.policy

@@ -62,7 +62,7 @@ def run(args) -> int:
 
     out = Path(args.out)
     if run_kind(args.run) == "primitive":
-        from corn_drake.rl.primitive_agent import load_primitive_run
+        from corn_drake.rl.primitive.agent import load_primitive_run
 
         cfg, agent, _ = load_primitive_run(args.run)  # painted by its location scores
     else:

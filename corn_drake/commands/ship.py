@@ -256,7 +256,7 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
     card fields. Only what `evaluate` loads (rl/primitive_agent.load_primitive_run) travels:
     the replay files and the learner's targets and optimisers are for resuming a run."""
     from corn_drake.rl.checkpoints import agent_weights_folder, run_encoder_path
-    from corn_drake.rl.primitive_agent import load_primitive_run
+    from corn_drake.rl.primitive.agent import load_primitive_run
     from corn_drake.run_folders.config_file import write_run_config
 
     cfg, agent, _ = load_primitive_run(run_dir)  # the run must load as evaluate would load it
@@ -306,7 +306,7 @@ def _ship_primitive(run_dir: Path, out: Path, library: str) -> dict:
         # The model that chooses travels with the actor that proposes motions.
         import shutil
 
-        from corn_drake.rl.outcome_model import MODEL_FILE
+        from corn_drake.rl.primitive.outcome.model import MODEL_FILE
         from corn_drake.storage.atomic_files import atomic_path
 
         with atomic_path(out / MODEL_FILE) as tmp:

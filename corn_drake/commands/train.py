@@ -1,4 +1,4 @@
-"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/trainer.py).
+"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/ppo/trainer.py).
 
 A new run's config is built in layers (corn_drake/config/diagram_files.py and overrides.py):
 the base diagram, the `--task` overlay, then the shortcut flags and `--set KEY=VALUE`
@@ -109,7 +109,7 @@ def run(args) -> int:
     from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.trainer import Trainer
+    from corn_drake.rl.ppo.trainer import Trainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     def check_new():  # a new run's own argument errors, named before a folder it cannot take
@@ -138,7 +138,7 @@ def checked_config(cfg, args, new_run: bool):
     from corn_drake.rl.device import training_device
 
     if cfg.env.scene.object.cycles_library:
-        from corn_drake.rl.vec_env import library_train_ids
+        from corn_drake.rl.envs.vec_env import library_train_ids
 
         library_train_ids(cfg.env.scene.object.library)  # every train object loaded and checked
     check_config(cfg)

@@ -1,5 +1,5 @@
 """`corn-drake train --policy primitive`: the contact-primitive policy, trained off-policy
-(rl/primitive_trainer.py). `train` hands a run here when --policy primitive is given or OUT
+(rl/primitive/trainer.py). `train` hands a run here when --policy primitive is given or OUT
 already holds a primitive run.
 
 A new run's config: PrimitiveTrainConfig with its env built in layers — the base diagram, the
@@ -63,7 +63,7 @@ def requested_config(args, recorded):
 
 def checked_config(cfg):
     if cfg.env.scene.object.cycles_library:
-        from corn_drake.rl.vec_env import library_train_ids
+        from corn_drake.rl.envs.vec_env import library_train_ids
 
         library_train_ids(cfg.env.scene.object.library)
     cfg.check()
@@ -97,7 +97,7 @@ def run(args) -> int:
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.checkpoints import run_encoder_path
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive_trainer import PrimitiveTrainer
+    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     def check_new():

@@ -20,5 +20,5 @@ PRIMITIVE_LOCATIONS = ("patch", "point")
 # (PrimitiveConfig.reward_points): the bounding-box corners, or the object's surface cloud.
 PRIMITIVE_REWARD_POINTS = ("keypoints", "cloud")
 # How a primitive run's agent chooses (PrimitiveTrainConfig.chooser): its critic's scores, or the
-# reward predicted by its outcome model (rl/outcome_chooser.py; the run's outcome_model.pt).
+# reward predicted by its outcome model (rl/primitive/outcome/chooser.py; the run's outcome_model.pt).
 PRIMITIVE_CHOOSERS = ("critic", "outcome_model")

@@ -173,7 +173,7 @@ class PrimitiveConfig:
     # push_turn policy's 16 successes on 46 unseen episodes ended mid-push, the object turning
     # at up to 6.4 rad/s (docs/results/primitive/, item 33). Off by default: the task's own
     # rule, the one every report here uses. With hindsight_goals a relabelled success needs the
-    # object still too (the observation's object_speed, rl/hindsight.py).
+    # object still too (the observation's object_speed, rl/primitive/hindsight.py).
     success_at_rest: bool = False
     rest_linear_speed: float = REST_LINEAR_SPEED
     rest_angular_speed: float = REST_ANGULAR_SPEED
@@ -191,7 +191,7 @@ def check_reward_points(primitive: PrimitiveConfig) -> None:
 @dc.dataclass
 class OutcomeChoiceConfig:
     """How a run whose chooser is "outcome_model" turns its outcome model file's predictions
-    into a choice (rl/outcome_chooser.py); `evaluate --set outcome.*` reaches them."""
+    into a choice (rl/primitive/outcome/chooser.py); `evaluate --set outcome.*` reaches them."""
     BOUNDS = {"pessimism": ">= 0", "tilt_veto": "(0, 1]"}
     # A candidate's score is its members' mean predicted reward less this many times their
     # standard deviation (the file must hold an ensemble: outcome_model.py fit --members). Why:
@@ -201,7 +201,7 @@ class OutcomeChoiceConfig:
     # 200 unseen push_turn episodes success stayed where one model left it (0.340 against
     # 0.345; docs/results/primitive/, item 38). Hence 0, the mean alone, by default.
     pessimism: float = 0.0
-    # Candidates the file's tilt classifier (rl/tilt_classifier.py, fit --tilt) gives a
+    # Candidates the file's tilt classifier (rl/primitive/outcome/tilt_classifier.py, fit --tilt) gives a
     # probability above this of tipping or rolling the object are not chosen, unless every
     # candidate is. Why: on push_turn a tipped object fails the episode, and the outcome
     # model's choices tipped it a quarter of the time (item 38). Measured on the 200 unseen
@@ -225,9 +225,9 @@ class OutcomeChoiceConfig:
 
 @dc.dataclass
 class PrimitiveTrainConfig(RunSettings):
-    """A primitive training run (rl/primitive_trainer.py). total_steps counts primitives (one
+    """A primitive training run (rl/primitive/trainer.py). total_steps counts primitives (one
     env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
-    holds `learning_starts` transitions. TD3 numbers: rl/td3.py's TD3Settings."""
+    holds `learning_starts` transitions. TD3 numbers: rl/primitive/td3.py's TD3Settings."""
     BOUNDS = {"replay_capacity": ">= 1", "learning_starts": ">= 1", "updates_per_step": ">= 0",
               "batch_size": ">= 1", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
@@ -245,7 +245,7 @@ class PrimitiveTrainConfig(RunSettings):
     point_locations: int = 64
     # How evaluation chooses: "critic", the location of highest Q with the actor's motion there;
     # "outcome_model", the candidate (the actor's motion or a fixed bank's, at every location)
-    # of highest reward predicted by the run's outcome_model.pt (rl/outcome_chooser.py), a run
+    # of highest reward predicted by the run's outcome_model.pt (rl/primitive/outcome/chooser.py), a run
     # folder written by docs/results/primitive/outcome_model.py fit. Measured on the 200 unseen
     # push_turn episodes: 0.330 against the critic's 0.295 (0.245 / 0.130 at rest; item 35).
     # Training (TD3) always explores with the critic's scores.
@@ -276,7 +276,7 @@ class PrimitiveTrainConfig(RunSettings):
     # Exploration: locations sampled from softmax(score / temperature), motions + N(0, noise).
     temperature: float = 0.1
     motion_noise: float = 0.3
-    # Hindsight goals (rl/hindsight.py, HER's "future" strategy): each finished episode's
+    # Hindsight goals (rl/primitive/hindsight.py, HER's "future" strategy): each finished episode's
     # transitions are stored this many more times, each with a goal the episode reached later,
     # so primitives that turned the object somewhere teach turning. 0: off.
     hindsight_goals: int = 0
@@ -319,5 +319,5 @@ class PrimitiveTrainConfig(RunSettings):
         if self.hindsight_goals and self.primitive.tip_penalty > 0:
             raise InputError(f"hindsight_goals ({self.hindsight_goals}) and primitive.tip_penalty "
                              f"({self.primitive.tip_penalty}) do not go together: relabelled "
-                             f"goals do not apply the tipping rule (rl/hindsight.py)")
+                             f"goals do not apply the tipping rule (rl/primitive/hindsight.py)")
         self.env.check()

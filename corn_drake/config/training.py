@@ -37,7 +37,7 @@ class PPOConfig:
     batches the KL rule holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a
     shared critic never fits the returns (docs/results/README.md, the one-step PPO probe).
     fan_in_lr_ref: ours, 0 (off) by default. > 0 scales the lr of each weight tensor by
-    min(1, fan_in_lr_ref / its fan-in) (rl/ppo.py fan_in_groups says why).
+    min(1, fan_in_lr_ref / its fan-in) (rl/ppo/ppo.py fan_in_groups says why).
     """
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {"gamma": "(0, 1]",
@@ -84,7 +84,7 @@ class RunSettings:
     seed: int = 0
     checkpoint_every: int = 5  # updates (train) or optimiser steps (distill) between checkpoints
     ray_address: str = ""  # a Ray cluster's address; empty: a local Ray
-    # Pin Ray worker w to core w + 1 of its node's usable cores (rl/core_pinning.py; Linux).
+    # Pin Ray worker w to core w + 1 of its node's usable cores (rl/workers/core_pinning.py; Linux).
     # For many-core machines; measured by `bench cores` and `bench scale --pin-workers`.
     pin_workers: bool = False
     # The pretrained encoder checkpoint the policy uses (train: frozen, for corn / pn / p2v-lite

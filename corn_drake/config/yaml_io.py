@@ -23,7 +23,7 @@ def _reduce_as_yaml(value):
 def pickle_as_yaml(schema) -> None:
     """Lets instances of one of Drake's config structs pickle, as their YAML (the text a run's
     config.yaml holds for them): Drake's structs do not pickle, and Ray ships configs to its
-    workers (rl/ray_workers.py)."""
+    workers (rl/workers/ray_workers.py)."""
     copyreg.pickle(schema, _reduce_as_yaml)
 
 

@@ -96,13 +96,13 @@ def policy_env(cfg, spec, meshcat, policy, stochastic: bool = False, seed: int |
     subset, the episode generator's default). `attention`: the teacher's attention view
     (TeacherEnv)."""
     from corn_drake.config.student import StudentDiagramConfig
-    from corn_drake.rl.env import TeacherEnv
-    from corn_drake.rl.student_env import StudentEnv
+    from corn_drake.rl.envs.teacher_env import TeacherEnv
+    from corn_drake.rl.envs.student_env import StudentEnv
 
     if getattr(policy, "kind", None) == "primitive":
         # The contact-primitive policy: its executor and policy systems in the teacher's
         # diagram (builders/primitive.py), with the executor settings it was trained with.
-        from corn_drake.rl.primitive_env import PrimitiveEnv
+        from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
         if stochastic or attention:
             raise InputError("the primitive policy acts greedily and has no cross-attention: "
@@ -133,7 +133,7 @@ def tracking_summary(steps: list[dict]) -> dict:
     median and max of the position error (m) and the orientation error (deg: the full rotation,
     so for an object with a symmetry axis it includes the unobservable roll), the fraction of
     steps the tracker trusted its ICP result, and the step count."""
-    from corn_drake.rl.vec_env import TRACKING_STATS
+    from corn_drake.rl.envs.vec_env import TRACKING_STATS
 
     out = {k: _summary([t[k] for t in steps]) for k in TRACKING_STATS}
     out["ok_fraction"] = float(np.mean([t["ok"] > 0 for t in steps])) if steps else None
@@ -174,7 +174,7 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
     perception (its segmentation: "geometric" or "ground_truth"), tracking (tracking_summary
     over every step of every episode) and each row's tracking (that episode's summary).
     """
-    from corn_drake.rl.student_env import StudentEnv
+    from corn_drake.rl.envs.student_env import StudentEnv
 
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")

@@ -2,7 +2,7 @@
 the outcome is the one evaluate reports for the seed), and the steps asked for rendered by
 viz/gallery.py's camera with the cloud painted by the policy's attention.
 
-A contact-primitive policy (rl/primitive_agent.py) has no attention: its stills paint the cloud
+A contact-primitive policy (rl/primitive/agent.py) has no attention: its stills paint the cloud
 by the policy's scores over its candidate contact locations (each point takes its nearest
 location's score) and mark the contact point it chose. Its episode runs in evaluate's own env,
 policy_env's PrimitiveEnv with the policy inside the diagram, so here too the outcome is
@@ -15,7 +15,7 @@ import numpy as np
 
 from corn_drake.contract import POSITION_DIM
 from corn_drake.evaluation.episodes import policy_env, run_episode
-from corn_drake.rl.env import TeacherEnv
+from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.viz.attention_view import viridis_rgb
 from corn_drake.viz.gallery import (GOAL_COLOUR, POINT_RADIUS_PX, Still, StillCamera, paint,
                                     pick_steps, side_view)
@@ -118,7 +118,7 @@ def primitive_episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "s
     the policy inside the diagram, one env step per policy period), each still's cloud coloured
     by the scores of the choice it shows (_DecisionLog.shown_at) and that choice's contact point
     marked in magenta. The summary adds `primitives`, the primitives the episode ran."""
-    from corn_drake.rl.primitive_env import STATUS_LAYOUT
+    from corn_drake.rl.envs.primitive_env import STATUS_LAYOUT
 
     frames = []  # (step, plant positions, cloud) of every observation
     log = _DecisionLog(agent, frames)

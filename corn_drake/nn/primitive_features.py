@@ -47,7 +47,7 @@ def with_goal(features: dict[str, np.ndarray], goal_position: np.ndarray,
     goal: `goal_position` (B, 3) the goal's position minus the object's (m, world frame) and
     `goal_rotation` (B, 3, 3) the goal's orientation times the object's transposed, as the
     observation's `goal` holds them. Tokens, locations, normals, the hand and the mask do not
-    depend on the goal, so hindsight goals (rl/hindsight.py) need no encoder pass."""
+    depend on the goal, so hindsight goals (rl/primitive/hindsight.py) need no encoder pass."""
     out = {k: np.array(v, copy=True) for k, v in features.items()}
     goal_position = np.asarray(goal_position, np.float64)
     goal_rotation = np.asarray(goal_rotation, np.float64)

@@ -7,7 +7,7 @@ from pathlib import Path
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import MissingInputError, load_error_detail
 from corn_drake.storage.checkpoint_files import load_checkpoint, load_checkpoint_and_file
-from corn_drake.rl.agent import TeacherAgent
+from corn_drake.rl.ppo.agent import TeacherAgent
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.run_folders.config_file import load_run_config
 

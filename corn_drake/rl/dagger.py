@@ -19,7 +19,7 @@ The recomputation doubles the student's forward passes but keeps the loss a func
 recorded window (window_loss), which is what the tests check on a fixed dataset. With the
 student's parameters unchanged inside a window, it gives the rollout's outputs exactly.
 
-Run folder as the teacher's (rl/trainer.py): config.yaml (a DistillConfig), checkpoints/last.pt
+Run folder as the teacher's (rl/ppo/trainer.py): config.yaml (a DistillConfig), checkpoints/last.pt
 (atomic, prev.pt kept), tb/, metrics.json, plots/. A killed run resumes at its last checkpoint's
 step with the same student, optimiser, RNG streams and beta; envs start fresh episodes (env
 state is not checkpointed, as for the teacher), and the GRU state starts from zero with them.
@@ -40,7 +40,7 @@ from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.nn.threads import torch_threads
-from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
 from corn_drake.rl.run_progress import (count_episodes_per_object, make_env_batch, progress_state,
                                         recent_mean, restore_progress, to_cpu)

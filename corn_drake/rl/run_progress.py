@@ -1,4 +1,4 @@
-"""What the teacher's PPO trainer (rl/trainer.py) and the student's DAgger (rl/dagger.py) share:
+"""What the teacher's PPO trainer (rl/ppo/trainer.py) and the student's DAgger (rl/dagger.py) share:
 the env batch of a run, CPU copies of state for checkpoints, the progress (counters, curves,
 RNG streams) a resumed run continues from, and per-object episode counts."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
 
 
 def run_env_factory(env_config, seed: int, workers: int, envs_per_worker: int,
@@ -22,12 +22,12 @@ def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
                    ray_address: str = "", start_episode: int = 0, pin: bool = False):
     """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
     Ray actors stepped in lock step (the DAgger student's; `env_config` a teacher or a student
-    diagram config). The PPO trainer collects whole segments instead (rl/segment_workers.py),
-    the primitive trainer rounds of primitives (rl/primitive_workers.py). `pin`: worker w on
-    core w + 1 (rl/core_pinning.py)."""
+    diagram config). The PPO trainer collects whole segments instead (rl/workers/segment_workers.py),
+    the primitive trainer rounds of primitives (rl/workers/primitive_workers.py). `pin`: worker w on
+    core w + 1 (rl/workers/core_pinning.py)."""
     factory = run_env_factory(env_config, seed, workers, envs_per_worker, start_episode)
     if workers > 0:
-        from corn_drake.rl.ray_workers import RayEnvBatch, init_ray
+        from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
 
         init_ray(ray_address or None)
         return RayEnvBatch(factory, workers, envs_per_worker, pin)

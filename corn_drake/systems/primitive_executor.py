@@ -148,7 +148,7 @@ def reachable_from_above(point_z, normal_z, cfg: PrimitiveConfig):
     the table. One below it (a point on the object's underside) would, raised above the table,
     lie inside the object, and the hand would press on the object from above: the executor
     gives such a primitive up at once, and the policy never chooses one (its location mask,
-    rl/primitive_agent.py). Plain arithmetic: floats, numpy arrays or torch tensors."""
+    rl/primitive/agent.py). Plain arithmetic: floats, numpy arrays or torch tensors."""
     natural = point_z + cfg.pre_contact_distance * normal_z
     return natural >= TABLE_TOP_Z + cfg.min_tool_height - cfg.reach_tolerance
 

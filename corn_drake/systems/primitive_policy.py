@@ -13,7 +13,7 @@ idle: one forward pass per primitive. `choice` and `scores` are held in discrete
 at the tick the executor takes the primitive from the same cached pass, so displays reading
 them every step cost nothing. The
 primitive's point and normal are looked up in the same observation the policy saw, as the
-gymnasium env (rl/primitive_env.py) does for an action, so the evaluation diagram and the env
+gymnasium env (rl/envs/primitive_env.py) does for an action, so the evaluation diagram and the env
 run the same primitive for the same choice.
 """
 

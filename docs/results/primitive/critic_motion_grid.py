@@ -18,8 +18,8 @@ import sys
 
 import torch
 
-from corn_drake.rl import primitive_agent
-from corn_drake.rl.td3 import masked
+from corn_drake.rl.primitive import agent as primitive_agent
+from corn_drake.rl.primitive.td3 import masked
 
 GRID = torch.tensor([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
 

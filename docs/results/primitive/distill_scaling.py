@@ -30,8 +30,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from lookahead_distill import load_data  # noqa: E402 - the collect folders' reader
 
-from corn_drake.rl.lookahead_distill import choice_quality, fit_critic  # noqa: E402
-from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
+from corn_drake.rl.primitive.outcome.lookahead_distill import choice_quality, fit_critic  # noqa: E402
+from corn_drake.rl.primitive.agent import load_primitive_run  # noqa: E402
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 
 BATCH_ROWS = 256  # rows per update (whole states, fit_critic's rank batches)

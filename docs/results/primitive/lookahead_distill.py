@@ -1,4 +1,4 @@
-"""The one-step lookahead distilled into a primitive policy (corn_drake/rl/lookahead_distill.py):
+"""The one-step lookahead distilled into a primitive policy (corn_drake/rl/primitive/outcome/lookahead_distill.py):
 README.md's item 34.
 
     # lookahead states on the library's training objects (resumable: one file per --chunk episodes)
@@ -28,10 +28,10 @@ import torch
 
 from corn_drake.assets.library import list_objects, load_object_spec
 from corn_drake.rl.checkpoints import run_encoder_path
-from corn_drake.rl.lookahead_distill import (choice_quality, collect_episode, critic_error,
+from corn_drake.rl.primitive.outcome.lookahead_distill import (choice_quality, collect_episode, critic_error,
                                              fit_actor, fit_critic, stack_states)
-from corn_drake.rl.primitive_agent import load_primitive_run
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.run_folders.config_file import run_config_path
 from corn_drake.storage.atomic_files import atomic_path, write_json, write_text
 from corn_drake.storage.checkpoint_files import save_checkpoint

@@ -1,5 +1,5 @@
 """Can the primitives do the task at all? A one-step lookahead with the simulator as its model
-(corn_drake/rl/lookahead.py) against the learned policy's greedy choices, on the first
+(corn_drake/rl/primitive/outcome/lookahead.py) against the learned policy's greedy choices, on the first
 episodes of `evaluate`'s unseen-object episodes: README.md's item 33.
 
     .venv/bin/python docs/results/primitive/lookahead_oracle.py models/weights/push_turn_primitive \
@@ -35,9 +35,9 @@ from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import episode_seed
 from corn_drake.evaluation.failures import (failure_category, motion_summary,
                                             successes_ending_still)
-from corn_drake.rl.lookahead import candidate_primitives, lookahead_step
-from corn_drake.rl.primitive_agent import load_primitive_run
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.primitive.outcome.lookahead import candidate_primitives, lookahead_step
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.storage.atomic_files import write_json
 
 EVAL_SEED = 1000  # evaluate's default --seed

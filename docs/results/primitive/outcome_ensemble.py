@@ -34,12 +34,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from distill_scaling import held_out_objects, select_states  # noqa: E402
 from lookahead_distill import load_data  # noqa: E402
 
-from corn_drake.rl.lookahead_distill import scores_quality  # noqa: E402
-from corn_drake.rl.outcome_model import (OUTCOME_KEYS, OUTCOME_ROW_KEYS,  # noqa: E402
+from corn_drake.rl.primitive.outcome.lookahead_distill import scores_quality  # noqa: E402
+from corn_drake.rl.primitive.outcome.model import (OUTCOME_KEYS, OUTCOME_ROW_KEYS,  # noqa: E402
                                          data_candidates, fit_model, model_inputs,
                                          predicted_rewards)
-from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
-from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
+from corn_drake.rl.primitive.agent import load_primitive_run  # noqa: E402
+from corn_drake.rl.primitive.outcome.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
                                            fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 

@@ -33,8 +33,8 @@ from distill_scaling import held_out_objects, select_states  # noqa: E402
 from outcome_ensemble import load_study  # noqa: E402
 from physics_priors import held_out_prediction  # noqa: E402
 
-from corn_drake.rl.lookahead_distill import scores_quality  # noqa: E402
-from corn_drake.rl.outcome_model import (SCALE, box_contact_features, data_after,  # noqa: E402
+from corn_drake.rl.primitive.outcome.lookahead_distill import scores_quality  # noqa: E402
+from corn_drake.rl.primitive.outcome.model import (SCALE, box_contact_features, data_after,  # noqa: E402
                                          data_candidates, model_inputs, predicted_rewards)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 

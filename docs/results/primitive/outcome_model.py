@@ -11,9 +11,9 @@
     corn-drake evaluate --run runs/push_turn_outcome --objects data/library --split unseen \
         --episodes 200 --record 0 --report docs/results/primitive/eval_push_turn_outcome_model.json
 
-The model and the reward it predicts are corn_drake/rl/outcome_model.py's; the choice among the
+The model and the reward it predicts are corn_drake/rl/primitive/outcome/model.py's; the choice among the
 actor's motion and a fixed bank of uniform motions at every usable location is
-rl/outcome_chooser.py's.
+rl/primitive/outcome/chooser.py's.
 
 `study`: each split holds out `--holdout-objects` objects whole; the held-out states' choices
 are scored in the rewards the simulator measured (rl/lookahead_distill.scores_quality), against
@@ -23,7 +23,7 @@ the run's critic before and after the rank fit of item 34 on the same states and
 outcome_model.pt, `chooser: outcome_model`, and `--task` / `--set` applied to its config as
 `corn-drake evaluate` applies them); `--members N` fits N models (seeds S..S+N-1 for `--seed S`,
 0 by default; the first the model a plain fit gives) for `outcome.pessimism`, `--tilt` a tilt
-classifier (rl/tilt_classifier.py) for `outcome.tilt_veto` and `outcome.tilt_blend` (with the
+classifier (rl/primitive/outcome/tilt_classifier.py) for `outcome.tilt_veto` and `outcome.tilt_blend` (with the
 mean reward its data measured for the candidates that tipped or rolled), `--objects N` fits on
 the first N objects of one fixed order only (item 40's learning curve over objects). The file
 keeps the first member's learning curve (`fit_history`), which `corn-drake ship` writes to the
@@ -44,16 +44,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from distill_scaling import (BATCH_ROWS, held_out_objects, load_study_data,  # noqa: E402
                              select_states, study_arguments)
 
-from corn_drake.rl.lookahead_distill import choice_quality, fit_critic, scores_quality  # noqa: E402
-from corn_drake.rl.outcome_chooser import OutcomeChooser  # noqa: E402
-from corn_drake.rl.outcome_file import save_outcome_model  # noqa: E402
-from corn_drake.rl.outcome_model import (INPUT_KINDS, OUTCOME_KEYS,  # noqa: E402
+from corn_drake.rl.primitive.outcome.lookahead_distill import choice_quality, fit_critic, scores_quality  # noqa: E402
+from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser  # noqa: E402
+from corn_drake.rl.primitive.outcome.model_file import save_outcome_model  # noqa: E402
+from corn_drake.rl.primitive.outcome.model import (INPUT_KINDS, OUTCOME_KEYS,  # noqa: E402
                                          OUTCOME_ROW_KEYS, SCALE, OutcomeModel, data_after,
                                          data_candidates, fit_model, model_inputs,
                                          predicted_rewards)
-from corn_drake.rl.outcome_run import outcome_run_config, write_outcome_run  # noqa: E402
-from corn_drake.rl.primitive_agent import load_primitive_run  # noqa: E402
-from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
+from corn_drake.rl.primitive.outcome.run_folder import outcome_run_config, write_outcome_run  # noqa: E402
+from corn_drake.rl.primitive.agent import load_primitive_run  # noqa: E402
+from corn_drake.rl.primitive.outcome.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
                                            fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 

@@ -26,9 +26,9 @@ import numpy as np
 
 from corn_drake.assets.library import list_objects, load_object_spec
 from corn_drake.config.diagram_files import with_primitive_task
-from corn_drake.rl.lookahead import lookahead_step
-from corn_drake.rl.primitive_agent import load_primitive_run
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.primitive.outcome.lookahead import lookahead_step
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.systems.reward import keypoints_at
 from corn_drake.transforms import quat_wxyz_to_matrix

@@ -19,7 +19,7 @@ Motions are the reward's: the box keypoints with the origin's height dropped
 
 With --splits S, per folder and per split (--holdout-objects objects held out whole, the
 first --object-fractions of the others fitted): the outcome model (rl/outcome_model.fit_model,
---updates updates) and rl/tilt_classifier.py's classifier of `tilted`, on the model's own
+--updates updates) and rl/primitive/outcome/tilt_classifier.py's classifier of `tilted`, on the model's own
 inputs and on that module's box-and-contact features (its docstring), each measured on the
 fitted objects and on the held-out ones: keypoint error against "no motion", and the
 classifiers' ROC AUC. What a model of the primitives learns of the objects it saw against what
@@ -39,10 +39,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from distill_scaling import held_out_objects, select_states  # noqa: E402
 from lookahead_distill import load_data  # noqa: E402 - the collect folders' reader
 
-from corn_drake.rl.outcome_model import (OUTCOME_KEYS,  # noqa: E402
+from corn_drake.rl.primitive.outcome.model import (OUTCOME_KEYS,  # noqa: E402
                                          OUTCOME_ROW_KEYS, SCALE, data_after, data_candidates,
                                          fit_model, model_inputs)
-from corn_drake.rl.tilt_classifier import (TILT_DEG, box_contact_features,  # noqa: E402
+from corn_drake.rl.primitive.outcome.tilt_classifier import (TILT_DEG, box_contact_features,  # noqa: E402
                                            data_tilted, fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 

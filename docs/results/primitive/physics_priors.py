@@ -4,7 +4,7 @@
         models/weights/push_turn_primitive --data runs/big_collect --library data/library_big \
         --out docs/results/primitive/physics_priors.json
 
-Item 38 left the outcome model (rl/outcome_model.py) no better than "the object does not move"
+Item 38 left the outcome model (rl/primitive/outcome/model.py) no better than "the object does not move"
 on held-out objects, and its tilt classifier at ROC AUC 0.78: both see the object only as its
 bounding box, which is the same for a lying cylinder (it rolls) and a box (it slides). Two priors
 from pushing mechanics, computed from the object's cloud as the privileged observation has it:
@@ -24,7 +24,7 @@ from pushing mechanics, computed from the object's cloud as the privileged obser
 
 Per split `--holdout-objects` objects are held out whole; on the others the outcome model is
 fitted to its own inputs (`plain`), with the support numbers (`support`) and with both priors
-(`support_analytic`), and tilt classifiers (rl/tilt_classifier.py) on the box-and-contact
+(`support_analytic`), and tilt classifiers (rl/primitive/outcome/tilt_classifier.py) on the box-and-contact
 features with and without the support numbers. Every held-out state's choice is scored in the
 rewards the simulator measured (`chosen`, per primitive), choosing by each model's predicted
 reward, alone and blended by a classifier (outcome.tilt_blend: (1 - p) x reward + p x the mean
@@ -50,11 +50,11 @@ from distill_scaling import held_out_objects, select_states  # noqa: E402
 from outcome_ensemble import load_study  # noqa: E402
 from outcome_sources import roc_auc  # noqa: E402
 
-from corn_drake.rl.lookahead_distill import scores_quality  # noqa: E402
-from corn_drake.rl.outcome_model import (SCALE, data_after, data_candidates,  # noqa: E402
+from corn_drake.rl.primitive.outcome.lookahead_distill import scores_quality  # noqa: E402
+from corn_drake.rl.primitive.outcome.model import (SCALE, data_after, data_candidates,  # noqa: E402
                                          fit_network, model_inputs, predicted_rewards,
                                          rotation_matrices)
-from corn_drake.rl.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
+from corn_drake.rl.primitive.outcome.tilt_classifier import (box_contact_features, data_tilted,  # noqa: E402
                                            fit_tilt_classifier)
 from corn_drake.storage.atomic_files import write_json  # noqa: E402
 from corn_drake.systems.primitive_executor import pre_contact_point  # noqa: E402

@@ -26,8 +26,8 @@ import numpy as np
 
 from corn_drake.assets.library import list_objects, load_object_spec
 from corn_drake.config.diagram_files import primitive_run_on
-from corn_drake.rl.primitive_agent import load_primitive_run
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.systems import primitive_executor as executor
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from corn_drake.assets.manifest import read_manifest
 from corn_drake.config.diagram_files import load_primitive_env_config
-from corn_drake.rl.primitive_agent import load_primitive_run
-from corn_drake.rl.primitive_env import PrimitiveEnv
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.tasks.faces import TIPPED_ANGLE_RAD
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle, up_angle
 

@@ -1,5 +1,5 @@
 """Rollout segments: a batch of envs stepped for a whole PPO rollout by the policy, where the envs
-are (in this process, or inside a Ray worker: rl/segment_workers.py).
+are (in this process, or inside a Ray worker: rl/workers/segment_workers.py).
 
 A SegmentCollector owns an env batch, a policy and the batch's current observation. collect()
 takes the update's unit noise (T, E, A) — drawn by the learner, so every path acts with the same
@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from corn_drake.rl.agent import obs_to_tensors
-from corn_drake.rl.ppo import actions_from_noise
-from corn_drake.rl.vec_env import stack_obs
+from corn_drake.rl.ppo.agent import obs_to_tensors
+from corn_drake.rl.ppo.ppo import actions_from_noise
+from corn_drake.rl.envs.vec_env import stack_obs
 
 
 @dataclasses.dataclass

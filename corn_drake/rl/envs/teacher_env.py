@@ -5,9 +5,9 @@ Simulator built once and reused; reset() draws an Episode (corn_drake/tasks/epis
 writes it into the context (TeacherDiagram.write_episode); step() fixes the action input port,
 advances one policy period and reads reward, status and termination; snapshot() and restore()
 save and bring back the whole state (the root context and the env's counters), so several
-actions can be tried from one state (rl/lookahead.py). What the policy sees is
+actions can be tried from one state (rl/primitive/outcome/lookahead.py). What the policy sees is
 the subclass's: TeacherEnv returns the teacher's privileged observation (TeacherObservationReader);
-corn_drake/rl/student_env.py's StudentEnv returns the student's and the teacher's of the same
+corn_drake/rl/envs/student_env.py's StudentEnv returns the student's and the teacher's of the same
 state. Whole episodes with a policy, recordings and reports are corn_drake/evaluation/episodes.py's job.
 """
 
@@ -122,7 +122,7 @@ class DiagramEnv(gym.Env):
     def snapshot(self) -> "EnvSnapshot":
         """The env's state now (the diagram's whole context: time, plant, controller, executor;
         and the env's own counters), for restore(): a one-step lookahead tries several actions
-        from one state (rl/lookahead.py). Every system of the project keeps its state
+        from one state (rl/primitive/outcome/lookahead.py). Every system of the project keeps its state
         in the context, so nothing else needs saving."""
         if self.episode is None:
             raise InputError("snapshot: the env has no episode yet; call reset() first")

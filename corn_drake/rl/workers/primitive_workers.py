@@ -2,7 +2,7 @@
 
 Each PrimitiveWorker holds an EnvBatch, a CPU copy of the PrimitiveAgent (the frozen encoder,
 the actor and the critic) and a random stream of its own, and runs PrimitiveCollector rounds
-(rl/primitive_collection.py): it chooses with its copy of the networks, steps its envs, runs the
+(rl/primitive/collection.py): it chooses with its copy of the networks, steps its envs, runs the
 encoder on what they observe, and returns the transitions. The learner never steps an env or
 runs the encoder: it adds what arrives to its replay and takes its TD3 updates.
 
@@ -27,13 +27,13 @@ import dataclasses
 import numpy as np
 import ray
 
-from corn_drake.rl.hindsight import HindsightRule
-from corn_drake.rl.primitive_collection import (
+from corn_drake.rl.primitive.hindsight import HindsightRule
+from corn_drake.rl.primitive.collection import (
     Exploration,
     PrimitiveCollector,
     PrimitiveTransitions,
 )
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
 
 MAX_REPLACEMENTS = 3
 
@@ -43,7 +43,7 @@ class PrimitiveWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
                  seed: list[int], hindsight: HindsightRule | None = None,
                  pin_index: int | None = None):
-        from corn_drake.rl.core_pinning import take_worker_core
+        from corn_drake.rl.workers.core_pinning import take_worker_core
 
         take_worker_core(pin_index)
         self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent,
@@ -64,8 +64,8 @@ class PrimitiveWorker:
 class RayPrimitiveCollectors:
     """`num_workers` PrimitiveWorkers of `envs_per_worker` envs each. `seed` and `start_step`
     seed the workers' random streams (a resumed run's workers draw new ones); `hindsight`: the
-    workers relabel their finished episodes (rl/hindsight.py); `pin`: worker w runs on core
-    w + 1 (rl/core_pinning.py)."""
+    workers relabel their finished episodes (rl/primitive/hindsight.py); `pin`: worker w runs on core
+    w + 1 (rl/workers/core_pinning.py)."""
 
     def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
                  seed: int, start_step: int = 0, hindsight: HindsightRule | None = None,

@@ -7,12 +7,12 @@ during the run's first `random_steps` primitives, else rl/td3.select_primitives 
 temperature and motion noise) — and returns PrimitiveTransitions: per-location features of each
 state and of the state it led to (the encoder runs once per observation, here, so the learner
 never runs it), the choices, rewards and ends, and the finished episodes' stats. With a
-HindsightRule (rl/hindsight.py) each finished episode also comes back relabelled with goals it
+HindsightRule (rl/primitive/hindsight.py) each finished episode also comes back relabelled with goals it
 reached (`relabeled`), drawn from the same random stream.
 
 The trainer's in-process path (`--workers 0`) runs one collector with its own agent, learner
 and random stream, one round per loop, exactly as the trainer always did; Ray workers
-(rl/primitive_workers.py) each run one with a CPU copy of the networks and a stream of their own.
+(rl/workers/primitive_workers.py) each run one with a CPU copy of the networks and a stream of their own.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from corn_drake.rl.hindsight import HindsightEpisodes, HindsightRule, achieved_states
-from corn_drake.rl.td3 import choosable
+from corn_drake.rl.primitive.hindsight import HindsightEpisodes, HindsightRule, achieved_states
+from corn_drake.rl.primitive.td3 import choosable
 
 # select(features, greedy=..., temperature=..., motion_noise=..., rng=...) -> (locations,
 # motions, scores): TD3Learner.select, or select_primitives over an agent's own networks.
@@ -50,7 +50,7 @@ class PrimitiveTransitions:
     next_features: dict[str, np.ndarray]  # the state each led to (an ended episode's last one)
     episode_stats: list[dict[str, Any]]
     version: int  # the learner's weights version the choices were made with
-    # Hindsight copies of the episodes that ended in these rounds (rl/hindsight.py): the same
+    # Hindsight copies of the episodes that ended in these rounds (rl/primitive/hindsight.py): the same
     # columns, not primitives of their own (the run's step counts only the ones above).
     relabeled: PrimitiveTransitions | None = None
 
@@ -78,7 +78,7 @@ class PrimitiveCollector:
         """`envs`: an EnvBatch of PrimitiveEnvs; `agent`: a PrimitiveAgent (its encoder makes
         the features); `select`: how the policy chooses (default: the agent's own networks);
         `hindsight`: relabel finished episodes with goals they reached (None: off)."""
-        from corn_drake.rl.td3 import select_primitives
+        from corn_drake.rl.primitive.td3 import select_primitives
 
         self.envs, self.agent = envs, agent
         self.hindsight = None if hindsight is None else HindsightEpisodes(hindsight, len(envs))

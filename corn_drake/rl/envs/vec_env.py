@@ -86,7 +86,7 @@ class EnvFactory:
     # episode seeds from about where it stopped instead of replaying its first episodes.
     start_episode: int = 0
     # A PrimitiveConfig makes PrimitiveEnvs (one step = one contact primitive,
-    # rl/primitive_env.py) of the teacher config instead of TeacherEnvs.
+    # rl/envs/primitive_env.py) of the teacher config instead of TeacherEnvs.
     primitive: Any = None
 
     @property
@@ -113,8 +113,8 @@ class EnvFactory:
         return int(np.random.SeedSequence([self.seed, index, episode]).generate_state(1)[0])
 
     def make(self, index: int, episode: int = 0):
-        from corn_drake.rl.env import TeacherEnv
-        from corn_drake.rl.student_env import StudentEnv
+        from corn_drake.rl.envs.teacher_env import TeacherEnv
+        from corn_drake.rl.envs.student_env import StudentEnv
 
         cfg = copy.deepcopy(self.config)
         student = isinstance(cfg, StudentDiagramConfig)
@@ -129,7 +129,7 @@ class EnvFactory:
             teacher_cfg.scene.object.library_objects = "one"
             teacher_cfg.scene.object.object_id = object_id
         if self.primitive is not None:
-            from corn_drake.rl.primitive_env import PrimitiveEnv
+            from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
             return PrimitiveEnv(cfg, self.primitive)
         return StudentEnv(cfg) if student else TeacherEnv(cfg)

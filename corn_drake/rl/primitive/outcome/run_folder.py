@@ -11,8 +11,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from corn_drake.rl.outcome_file import save_outcome_model
-from corn_drake.rl.outcome_model import MODEL_FILE
+from corn_drake.rl.primitive.outcome.model_file import save_outcome_model
+from corn_drake.rl.primitive.outcome.model import MODEL_FILE
 
 
 def outcome_run_config(run: Path, task: str | None, sets: list[str]):
@@ -20,7 +20,7 @@ def outcome_run_config(run: Path, task: str | None, sets: list[str]):
     reads it, `task`'s overlay and `sets` applied as `corn-drake evaluate` applies them."""
     from corn_drake.config.diagram_files import primitive_run_on
     from corn_drake.rl.checkpoints import run_encoder_path
-    from corn_drake.rl.primitive_agent import load_primitive_run
+    from corn_drake.rl.primitive.agent import load_primitive_run
 
     base, _, _ = load_primitive_run(run)
     cfg = primitive_run_on(base, task, sets)

@@ -1,17 +1,17 @@
 """Off-policy training of the contact-primitive policy (`corn-drake train --policy primitive`).
 
-Collection (rl/primitive_collection.py): every env runs primitives chosen by the current policy
+Collection (rl/primitive/collection.py): every env runs primitives chosen by the current policy
 (softmax over per-location scores + motion noise; the first `random_steps` primitives uniformly
 random); the transitions go into the replay buffer as per-location features (the frozen encoder
 runs once per observation, where the envs are), and the learner takes `updates_per_step` TD3
-steps per primitive collected (rl/td3.py), on `--device`.
+steps per primitive collected (rl/primitive/td3.py), on `--device`.
 - In-process (`--workers 0`): one round (a primitive in every env) per loop, then its updates;
   a seed repeats a run exactly.
 With `hindsight_goals` > 0 the collectors also relabel every finished episode with goals it
-reached (rl/hindsight.py); those copies go into the replay too but are not counted as primitives.
+reached (rl/primitive/hindsight.py); those copies go into the replay too but are not counted as primitives.
 - Ray (`--workers N`): each worker steps its own envs with its own copy of the networks, one
   round per request, asynchronously: the learner updates while the workers step
-  (rl/primitive_workers.py).
+  (rl/workers/primitive_workers.py).
 
 Run folder: config.yaml, encoder.pt (the frozen encoder, copied in so the folder is
 self-contained), checkpoints/last.pt (+ prev.pt) and checkpoints/replay_<step>.npz, tb/
@@ -34,12 +34,12 @@ from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.errors import InputError
 from corn_drake.rl.device import training_device
-from corn_drake.rl.hindsight import HindsightRule
-from corn_drake.rl.primitive_agent import agent_for
-from corn_drake.rl.primitive_collection import Exploration, PrimitiveTransitions
-from corn_drake.rl.replay import ReplayBuffer
+from corn_drake.rl.primitive.hindsight import HindsightRule
+from corn_drake.rl.primitive.agent import agent_for
+from corn_drake.rl.primitive.collection import Exploration, PrimitiveTransitions
+from corn_drake.rl.primitive.replay import ReplayBuffer
 from corn_drake.rl.run_progress import recent_mean, run_env_factory, to_cpu
-from corn_drake.rl.td3 import TD3Learner, TD3Settings
+from corn_drake.rl.primitive.td3 import TD3Learner, TD3Settings
 from corn_drake.storage.atomic_files import write_json
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 
@@ -76,16 +76,16 @@ class PrimitiveTrainer:
                                   self.episodes // n_envs, cfg.primitive)
         self.collector = self.workers = None
         if cfg.workers > 0:
-            from corn_drake.rl.primitive_workers import RayPrimitiveCollectors
-            from corn_drake.rl.ray_workers import init_ray
+            from corn_drake.rl.workers.primitive_workers import RayPrimitiveCollectors
+            from corn_drake.rl.workers.ray_workers import init_ray
 
             init_ray(cfg.ray_address or None)
             self.workers = RayPrimitiveCollectors(factory, cfg.workers, cfg.envs_per_worker,
                                                   self.agent, cfg.seed, self.global_step,
                                                   hindsight, pin=cfg.pin_workers)
         else:
-            from corn_drake.rl.primitive_collection import PrimitiveCollector
-            from corn_drake.rl.vec_env import EnvBatch
+            from corn_drake.rl.primitive.collection import PrimitiveCollector
+            from corn_drake.rl.envs.vec_env import EnvBatch
 
             self.collector = PrimitiveCollector(EnvBatch(factory, cfg.envs_per_worker),
                                                 self.agent, self.learner.select, hindsight)

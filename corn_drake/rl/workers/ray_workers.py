@@ -15,14 +15,14 @@ import dataclasses
 import numpy as np
 import ray
 
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
+from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
 
 
 @ray.remote(num_cpus=1)
 class RolloutWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int,
                  pin_index: int | None = None):
-        from corn_drake.rl.core_pinning import take_worker_core
+        from corn_drake.rl.workers.core_pinning import take_worker_core
 
         take_worker_core(pin_index)
         self.batch = EnvBatch(factory, num_envs, first_index)

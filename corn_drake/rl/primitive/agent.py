@@ -4,7 +4,7 @@ a per-location actor (the push motion at each location) and a twin per-location 
 The policy's choice for an observation: the location with the highest score, the score being
 the critic's Q1 at that location with the actor's motion there (HACMan's per-point critic), and
 that motion; or, for a run whose config's `chooser` is "outcome_model", the candidate of highest
-reward predicted by its outcome model (rl/outcome_chooser.py). `choose` returns the chosen
+reward predicted by its outcome model (rl/primitive/outcome/chooser.py). `choose` returns the chosen
 location's index into the cloud (the env action's `point`), the motion, the location's own index
 and the scores of every location (for display).
 
@@ -95,7 +95,7 @@ class PrimitiveAgent(nn.Module):
                            ) -> tuple[torch.Tensor, torch.Tensor]:
         """(per-location scores, -inf where features["mask"] rules a location out; the actor's
         motions): rl/td3.scores_and_motions with this agent's networks."""
-        from corn_drake.rl.td3 import scores_and_motions
+        from corn_drake.rl.primitive.td3 import scores_and_motions
 
         return scores_and_motions(self.actor, self.critic, features)
 
@@ -201,9 +201,9 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         raise InputError(f"{run_config_path(run_dir)}: chooser must be one of "
                          f"{', '.join(PRIMITIVE_CHOOSERS)}, got {cfg.chooser!r}")
     if cfg.chooser == "outcome_model":
-        from corn_drake.rl.outcome_chooser import OutcomeChooser
-        from corn_drake.rl.outcome_file import load_outcome_parts
-        from corn_drake.rl.outcome_model import MODEL_FILE
+        from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
+        from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts
+        from corn_drake.rl.primitive.outcome.model import MODEL_FILE
 
         parts = load_outcome_parts(run_dir / MODEL_FILE)
         agent.outcome_chooser = OutcomeChooser(parts.models, parts.facts["tokens"], parts.facts,

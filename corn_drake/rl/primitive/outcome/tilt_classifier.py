@@ -1,5 +1,5 @@
 """Which candidate primitives will tip or roll the object: a classifier the outcome chooser can
-veto them with (rl/outcome_chooser.py, config `outcome.tilt_veto`).
+veto them with (rl/primitive/outcome/chooser.py, config `outcome.tilt_veto`).
 
 Why (docs/results/primitive/README.md, items 37-38): tipping and rolling hold most of the
 primitives' outcome variation, a model of the outcome learns them for the objects it saw and
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.rl.outcome_model import BATCH_ROWS, Candidates, box_contact_features
+from corn_drake.rl.primitive.outcome.model import BATCH_ROWS, Candidates, box_contact_features
 from corn_drake.transforms import quat_wxyz_to_matrix
 
 TILT_DEG = 20.0  # the up direction turned further than this: the object tipped or rolled

@@ -2,7 +2,7 @@
 candidate primitive earned, as the simulator measured it, and its actor the best motion per
 location under that critic.
 
-Why: a one-step lookahead over the agent's own candidate primitives (rl/lookahead.py)
+Why: a one-step lookahead over the agent's own candidate primitives (rl/primitive/outcome/lookahead.py)
 reaches push_turn's goals, the object at rest, in ~0.9 of unseen episodes where the TD3 policy
 reaches ~0.13 (docs/results/primitive/, item 33). The primitives can do the task; TD3 with a
 few thousand primitives does not learn to choose them. Every lookahead state gives the reward of
@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from corn_drake.errors import InputError
-from corn_drake.rl.lookahead import candidate_primitives, lookahead_step
+from corn_drake.rl.primitive.outcome.lookahead import candidate_primitives, lookahead_step
 from corn_drake.systems.low_push import push_contact
 
 FEATURE_KEYS = ("tokens", "local", "global", "mask")

@@ -1,6 +1,6 @@
 """The outcome model file (a run folder's outcome_model.pt, rl/outcome_model.MODEL_FILE): the
 outcome model, optionally further members fitted to the same data (an ensemble) and a tilt
-classifier (rl/tilt_classifier.py), with what they take as input and the facts of their data.
+classifier (rl/primitive/outcome/tilt_classifier.py), with what they take as input and the facts of their data.
 Written by docs/results/primitive/outcome_model.py fit (rl/outcome_run.write_outcome_run), read
 by rl/primitive_agent.load_primitive_run for a run whose chooser is "outcome_model".
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from corn_drake.rl.outcome_model import INPUT_KINDS, OutcomeModel
-from corn_drake.rl.tilt_classifier import TiltClassifier
+from corn_drake.rl.primitive.outcome.model import INPUT_KINDS, OutcomeModel
+from corn_drake.rl.primitive.outcome.tilt_classifier import TiltClassifier
 
 
 def save_outcome_model(path, model: OutcomeModel, tokens: bool, members=(), tilt=None,

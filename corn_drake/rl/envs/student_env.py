@@ -1,6 +1,6 @@
 """StudentEnv: the gymnasium env over the student rollout diagram (diagrams/student_rollout.yaml).
 
-Same API and episode handling as TeacherEnv (rl/env.py's DiagramEnv: one env base), but every
+Same API and episode handling as TeacherEnv (rl/envs/teacher_env.py's DiagramEnv: one env base), but every
 observation holds two observation sets of the same state:
 
     obs = {"student": {key: array for key in STUDENT_OBS_KEYS},   # what a real robot has
@@ -30,7 +30,7 @@ from corn_drake.contract import STUDENT_OBS_KEYS, student_observation_shapes
 from corn_drake.builders.student import StudentDiagram, build_student_diagram
 from corn_drake.config.diagram_files import load_student_config
 from corn_drake.errors import InputError
-from corn_drake.rl.env import DiagramEnv, TeacherObservationReader
+from corn_drake.rl.envs.teacher_env import DiagramEnv, TeacherObservationReader
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.pose_tracker import STATUS_FIELDS as TRACKER_STATUS_FIELDS
 from corn_drake.systems.pose_tracker import pose7_to_matrix, pose_error

@@ -70,7 +70,7 @@ def select_primitives(scored: tuple[torch.Tensor, torch.Tensor], *, greedy: bool
     per-location scores (-inf where masked) and motions of a batch of states (`scored`:
     scores_and_motions' pair). A free function so
     a collector holding only a copy of the actor and critic (a Ray worker,
-    rl/primitive_collection.py) chooses exactly as the learner does.
+    rl/primitive/collection.py) chooses exactly as the learner does.
 
     greedy: the best-scoring location and the actor's motion there. Otherwise the location
     is drawn from softmax(scores / temperature) and N(0, motion_noise) is added to the motion

@@ -1,4 +1,4 @@
-"""The contact-primitive policy's choice made by the outcome model (rl/outcome_model.py) instead
+"""The contact-primitive policy's choice made by the outcome model (rl/primitive/outcome/model.py) instead
 of the critic: at every usable location the actor's motion and a fixed bank of uniform motions
 are candidates, and the candidate of highest predicted reward is the one chosen. With an
 ensemble, the score is the members' mean reward less `outcome.pessimism` times their deviation;
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from corn_drake.errors import InputError
-from corn_drake.rl.outcome_model import Candidates, model_inputs, predicted_rewards
+from corn_drake.rl.primitive.outcome.model import Candidates, model_inputs, predicted_rewards
 from corn_drake.transforms import from_pose9
 
 BANK = 32  # uniform motions tried at every location besides the actor's

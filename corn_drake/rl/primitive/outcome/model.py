@@ -18,7 +18,7 @@ input kind "box_contact" reads object-relative numbers instead (box_contact_feat
 height as a fraction of the box's, the box's proportions along and across the push...).
 
 The data are `lookahead_distill.py collect` folders whose states hold their outcomes
-(rl/lookahead_distill.collect_episode); outcome_model.pt files are rl/outcome_file.py's.
+(rl/lookahead_distill.collect_episode); outcome_model.pt files are rl/primitive/outcome/model_file.py's.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def _turn(frames: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def box_contact_features(c: Candidates) -> torch.Tensor:
     """(R, 13 + physics) object-relative features of every candidate, so that what is learned
-    of a box's proportions carries to other objects (rl/tilt_classifier.py; an outcome model's
+    of a box's proportions carries to other objects (rl/primitive/outcome/tilt_classifier.py; an outcome model's
     inputs with input_kind "box_contact"). In the push's frame: the aim point's height over the
     box's bottom as a fraction of the box's height; the box's height, length and width
     (decimetres); its height over its length; the aim point's offset from the box's centre

@@ -3,9 +3,9 @@
 Each SegmentWorker holds an EnvBatch and a CPU copy of the learner's agent. Per update the
 learner puts the agent's weights into Ray's object store once (every worker reads that one
 copy), and sends each worker its columns of the update's unit noise; the worker runs batched
-inference over its envs and steps them for the whole segment (rl/segments.py), and returns the
+inference over its envs and steps them for the whole segment (rl/ppo/segments.py), and returns the
 segment. So a worker pays one round trip per update instead of one per env step (the lock-step
-RayEnvBatch, rl/ray_workers.py, which the DAgger student still uses),
+RayEnvBatch, rl/workers/ray_workers.py, which the DAgger student still uses),
 and the learner runs no per-step inference at all.
 
 PPO stays on-policy: a segment carries the update whose weights it acted with, and the learner
@@ -23,8 +23,8 @@ import dataclasses
 import numpy as np
 import ray
 
-from corn_drake.rl.segments import Segment, SegmentCollector, concat_segments
-from corn_drake.rl.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.ppo.segments import Segment, SegmentCollector, concat_segments
+from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
 
 # A worker replaced this many times within one update's collection means the fault is not the
 # worker's (a segment that always kills its process): the update fails instead of looping.
@@ -35,7 +35,7 @@ MAX_REPLACEMENTS_PER_UPDATE = 3
 class SegmentWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
                  pin_index: int | None = None):
-        from corn_drake.rl.core_pinning import take_worker_core
+        from corn_drake.rl.workers.core_pinning import take_worker_core
 
         take_worker_core(pin_index)
         self.collector = SegmentCollector(EnvBatch(factory, num_envs, first_index), agent, "cpu")
@@ -56,7 +56,7 @@ class SegmentWorker:
 class RaySegmentCollectors:
     """`num_workers` SegmentWorkers of `envs_per_worker` envs each, looking like one
     SegmentCollector over all their envs (worker 0's first); `pin`: worker w runs on core w + 1
-    (rl/core_pinning.py)."""
+    (rl/workers/core_pinning.py)."""
 
     def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
                  pin: bool = False):

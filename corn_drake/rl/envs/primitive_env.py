@@ -41,7 +41,7 @@ from corn_drake.config.primitive import PrimitiveConfig, at_rest, check_reward_p
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
-from corn_drake.rl.env import DiagramEnv, TeacherObservationReader, zeros_like_space
+from corn_drake.rl.envs.teacher_env import DiagramEnv, TeacherObservationReader, zeros_like_space
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.low_push import push_contact
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM, STATUS_LAYOUT,

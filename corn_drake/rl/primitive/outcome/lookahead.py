@@ -7,7 +7,7 @@ can take a task when each primitive is chosen as well as one primitive's outcome
 that is far above the learned policy, the learner is what holds the task back; if it is not,
 the primitives are (docs/results/primitive/README.md, item 33;
 docs/results/primitive/lookahead_oracle.py runs it on the evaluation episodes). It is also the
-teacher rl/lookahead_distill.py fits the policy to (item 34).
+teacher rl/primitive/outcome/lookahead_distill.py fits the policy to (item 34).
 
 The candidates are the learned policy's own: for every location it may use, the motion its
 actor gives there, plus `random_motions` motions drawn uniformly from [-1, 1]^3 per location.

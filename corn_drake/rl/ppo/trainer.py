@@ -7,10 +7,10 @@ optimizer, normalisers and RNG state (environments start fresh episodes, continu
 over the library's train objects). metrics.json's episodes_per_object counts the finished
 training episodes of each object over the whole run.
 
-Each update's rollout is one segment (rl/segments.py): the learner draws the unit action noise
+Each update's rollout is one segment (rl/ppo/segments.py): the learner draws the unit action noise
 for every env and step, and the envs are stepped for the whole rollout where they are — in this
 process by the learner's agent (`workers` 0), or inside Ray workers, each with a CPU copy of the
-agent whose weights the learner broadcasts once per update (rl/segment_workers.py). Both paths
+agent whose weights the learner broadcasts once per update (rl/workers/segment_workers.py). Both paths
 act with the same noise, so they run the same episodes for the same seed.
 
 `cfg.device` holds the agent, the in-process path's batched inference, the rollout tensors and
@@ -32,12 +32,12 @@ from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.storage.atomic_files import write_json
-from corn_drake.rl.agent import TeacherAgent, obs_to_tensors
+from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.checkpoints import init_agent_state, snapshot_path
 from corn_drake.rl.device import training_device
 from corn_drake.rl.normalization import RewardScaler
-from corn_drake.rl.ppo import PPO, compute_gae
-from corn_drake.rl.segments import SegmentCollector
+from corn_drake.rl.ppo.ppo import PPO, compute_gae
+from corn_drake.rl.ppo.segments import SegmentCollector
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.viz.learning_curves import plot_learning_curves
 # to_cpu and count_episodes_per_object stay importable from here for existing callers.
@@ -93,15 +93,15 @@ class Trainer:
     def _make_rollouts(self, n_envs: int):
         """The run's collector: its envs in this process, stepped by the learner's own agent
         (workers 0), or on `workers` Ray workers that step their own envs with a CPU copy."""
-        from corn_drake.rl.vec_env import EnvBatch
+        from corn_drake.rl.envs.vec_env import EnvBatch
 
         cfg = self.cfg
         # A resumed run's envs continue the object rounds where the run stopped (on average).
         start = sum(self.episodes_per_object.values()) // n_envs
         factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker, start)
         if cfg.workers > 0:
-            from corn_drake.rl.ray_workers import init_ray
-            from corn_drake.rl.segment_workers import RaySegmentCollectors
+            from corn_drake.rl.workers.ray_workers import init_ray
+            from corn_drake.rl.workers.segment_workers import RaySegmentCollectors
 
             init_ray(cfg.ray_address or None)
             return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent,
