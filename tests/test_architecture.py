@@ -131,3 +131,28 @@ def test_no_circle_between_modules():
         if node not in state:
             visit(node, [node])
     assert cycle == []
+
+
+# A room a newcomer reads at a glance (issue 52): rl/ holds shared helpers at its top and one
+# folder per role (envs/, ppo/, primitive/, workers/), none past a dozen modules.
+MAX_RL_TOP_MODULES = 10
+MAX_RL_FOLDER_MODULES = 12
+
+
+def folder_sizes() -> dict[str, int]:
+    """{folder relative to the package: .py modules directly inside it}, data folders excluded."""
+    sizes = {}
+    for folder in [PACKAGE, *sorted(p for p in PACKAGE.rglob("*") if p.is_dir())]:
+        rel = folder.relative_to(PACKAGE).as_posix()
+        if "_data" in rel or "__pycache__" in rel:
+            continue
+        sizes[rel] = len(list(folder.glob("*.py")))
+    return sizes
+
+
+def test_rl_is_split_into_rooms_none_over_a_dozen_modules():
+    sizes = folder_sizes()
+    assert sizes["rl"] <= MAX_RL_TOP_MODULES, f"rl/ has {sizes['rl']} modules at its top"
+    too_big = {f: n for f, n in sizes.items() if f.startswith("rl/") and n > MAX_RL_FOLDER_MODULES}
+    assert too_big == {}
+    assert len([f for f in sizes if f.startswith("rl/")]) >= 4  # the rooms exist (not vacuous)

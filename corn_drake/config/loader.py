@@ -9,6 +9,7 @@ import typing
 from pathlib import Path
 from typing import TypeVar
 
+from corn_drake.config.retired import refuse_retired
 from corn_drake.config.yaml_io import dump_tagged_yaml, field_types, read_tagged_yaml
 from corn_drake.errors import InputError, MissingInputError
 
@@ -52,6 +53,9 @@ def _load_typed(schema: type[T], name: str, defaults: T | None = None, **source)
     except yaml.YAMLError as e:
         raise InputError(f"invalid config {name}: not valid YAML ({_one_line(e)})") from e
     except RuntimeError as e:
+        # drake's "unknown key": a retired setting says so instead (config/retired.py).
+        text = source["data"] if "data" in source else Path(source["filename"]).read_text()
+        refuse_retired(schema, read_tagged_yaml(text), f"invalid config {name}")
         raise InputError(f"invalid config {name}: {_one_line(e)}") from e
     except _LOAD_ERRORS as e:
         text = source["data"] if "data" in source else Path(source["filename"]).read_text()

@@ -10,6 +10,7 @@ import typing
 from typing import Any, Iterable, Mapping, TypeVar
 
 from corn_drake.config.loader import load_config
+from corn_drake.config.retired import retired_message, retired_reason
 from corn_drake.config.training import TrainConfig
 from corn_drake.config.yaml_io import (TaggedMapping, config_fields, dump_tagged_yaml, field_types,
                                        read_tagged_yaml)
@@ -51,6 +52,9 @@ def resolve_key(key: str, label: str, root: Any = TrainConfig) -> tuple[str, Any
         parent = ".".join(parts[:i]) or "the run config"
         if fields is None:
             raise InputError(f"{label}: unknown key {key!r}: {parent} is a value, not a section")
+        if part not in fields and retired_reason(schema, part) is not None:
+            raise InputError(retired_message(label, ".".join(parts[:i + 1]),
+                                             retired_reason(schema, part)))
         if part not in fields:
             raise InputError(f"{label}: unknown key {'.'.join(parts[:i + 1])!r}; {parent} has "
                              f"{', '.join(fields)}")
@@ -79,7 +83,7 @@ def set_fields(cfg: T, values: Mapping[str, Any], label: str) -> T:
 
 def on_library(cfg: TrainConfig, library: str, label: str = "--objects") -> TrainConfig:
     """`cfg` training on every train object of `library`, a new one each episode (train
-    --objects); rl/vec_env.library_train_ids checks that the library can be cycled."""
+    --objects); rl/envs/vec_env.library_train_ids checks that the library can be cycled."""
     return set_fields(cfg, {"env.scene.object.kind": "library",
                             "env.scene.object.library": library,
                             "env.scene.object.library_objects": "train",
