@@ -16,7 +16,7 @@ import sys
 
 from corn_drake import commands
 from corn_drake.arguments.help_format import DefaultsHelpFormatter
-from corn_drake.errors import InputError
+from corn_drake.errors import InputError, is_disk_full
 
 
 def _command_modules():
@@ -89,6 +89,14 @@ def main(argv: list[str] | None = None) -> int:
         # SIGINT dies and ray.get raises): one line and 128 + the signal, as a shell reports it.
         signum = (e.signum if isinstance(e, Interrupted) else signal.SIGINT
                   if isinstance(e, KeyboardInterrupt) else interrupted[0] if interrupted else None)
+        if signum is None and is_disk_full(e) and not debug:
+            # A full disk is no bug: one line naming the file. Every write is atomic (temporary
+            # file + rename), so what was written before it is complete and kept.
+            where = f" writing {e.filename}" if getattr(e, "filename", None) else ""
+            print(f"{args._prog}: error: no space left on the device{where}; the files written "
+                  "before are complete and kept: free space there and run the same command "
+                  "again to resume", file=sys.stderr)
+            return 2
         if signum is None or debug:
             raise
         _stop_ray()

@@ -33,6 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 NUM_JOINTS = 7  # Franka Panda arm joints (the fingers are welded closed)
+# Height (m) of the table's top in the world frame, whatever its size (scene/builder.py puts the
+# table box under it); here so the config's workspace check (config/teacher.py) can read it.
+TABLE_TOP_Z = 0.4
 ROBOT_STATE_DIM = 2 * NUM_JOINTS
 POSE9_DIM = 9  # position + 6D rotation
 POSE7_DIM = 7  # position + quaternion wxyz (Drake's pose order in our sources: p then q)

@@ -18,6 +18,21 @@ class MissingInputError(InputError, FileNotFoundError):
     catch that for a missing file keep working."""
 
 
+class DiskFullError(InputError, OSError):
+    """A write failed for want of space (ENOSPC, or EDQUOT: a quota): not a bug, and nothing
+    the program can do about it, so one line saying what was kept and what to free. Also an
+    OSError, so callers that catch that for a failed write keep working."""
+
+
+def is_disk_full(error: BaseException) -> bool:
+    """Whether `error` is a write that failed because the disk, or the user's quota on it, is
+    full (ENOSPC, EDQUOT)."""
+    import errno
+
+    return isinstance(error, OSError) and error.errno in {errno.ENOSPC,
+                                                          getattr(errno, "EDQUOT", errno.ENOSPC)}
+
+
 def load_error_detail(error: Exception) -> str:
     """The last line of a load_state_dict error (the mismatch itself, without torch's preamble),
     or the error's type when it has no message: what a one-line InputError quotes."""

@@ -15,14 +15,20 @@ from __future__ import annotations
 import dataclasses
 
 
+def whole_multiple(period: float, time_step: float) -> bool:
+    """Whether `period` is a whole number (>= 1) of physics steps `time_step`: the one rule the
+    clock below and the config check (config/scene.PhysicsConfig.RELATIONS) share."""
+    ratio = period / time_step if time_step > 0 else 0.0
+    return time_step > 0 and abs(ratio - round(ratio)) <= 1e-9 and round(ratio) >= 1
+
+
 @dataclasses.dataclass(frozen=True)
 class PolicyClock:
     period: float
     time_step: float
 
     def __post_init__(self):
-        ratio = self.period / self.time_step if self.time_step > 0 else 0.0
-        if self.time_step <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+        if not whole_multiple(self.period, self.time_step):
             raise ValueError(f"policy_period {self.period} must be a whole multiple of the physics "
                              f"time_step {self.time_step}")
 

@@ -156,3 +156,26 @@ def test_rl_is_split_into_rooms_none_over_a_dozen_modules():
     too_big = {f: n for f, n in sizes.items() if f.startswith("rl/") and n > MAX_RL_FOLDER_MODULES}
     assert too_big == {}
     assert len([f for f in sizes if f.startswith("rl/")]) >= 4  # the rooms exist (not vacuous)
+
+
+def _imports_experiments(path: Path) -> list[int]:
+    """Lines of `path` that import the experiments package (studies outside the product)."""
+    lines = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                 [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0
+                 else [])
+        lines += [node.lineno for n in names if n == "experiments" or n.startswith("experiments.")]
+    return lines
+
+
+def test_the_package_never_imports_the_experiments(tmp_path):
+    """experiments/ imports corn_drake like any user; never the other way round, so a study can
+    be deleted without touching the product."""
+    bad = [f"{path.relative_to(PACKAGE)}:{line}" for path, _ in _modules()
+           for line in _imports_experiments(path)]
+    assert bad == []
+    # The check sees both import forms, nested ones too.
+    probe = tmp_path / "probe.py"
+    probe.write_text("def f():\n    import experiments.x\n    from experiments import y\n")
+    assert _imports_experiments(probe) == [2, 3]

@@ -1,6 +1,6 @@
-"""`corn-drake bench cores`: N plain processes each collecting a segment worker's segments,
-unpinned and pinned: the report's figures recomputed from the seconds it records, the cores the
-pinned processes ran on, and a process that dies reported instead of waited for. (Bad flags
+"""`corn-drake bench cores`: N plain processes each collecting a segment worker's segments:
+the report's figures recomputed from the seconds it records, and a process that dies reported
+instead of waited for. (Bad flags
 are rows of tests/test_cli_bad_input.py.)"""
 
 import json
@@ -12,7 +12,6 @@ import pytest
 
 from corn_drake.bench import cores
 from corn_drake.cli import main
-from corn_drake.rl.workers.core_pinning import worker_core
 
 ENVS, STEPS, SEGMENTS = 1, 4, 2
 
@@ -21,11 +20,11 @@ def test_report_figures_follow_from_the_recorded_seconds(tmp_path):
     path = tmp_path / "cores.json"
     assert main(["bench", "cores", "--report", str(path), "--procs", "2",
                  "--envs-per-worker", str(ENVS), "--rollout-steps", str(STEPS),
-                 "--segments", str(SEGMENTS), "--warmup-segments", "0", "--pin", "both"]) == 0
+                 "--segments", str(SEGMENTS), "--warmup-segments", "0"]) == 0
     results = json.loads(path.read_text())["results"]
     assert results["procs"] == [1, 2]  # the 1-process baseline added
-    assert list(results["modes"]) == ["unpinned", "pinned"]
-    for name, mode in results["modes"].items():
+    assert list(results["modes"]) == ["unpinned"]  # the earlier reports' shape
+    for mode in results["modes"].values():
         runs = mode["runs"]
         assert [r["procs"] for r in runs] == [1, 2]
         base_pace = None
@@ -40,16 +39,12 @@ def test_report_figures_follow_from_the_recorded_seconds(tmp_path):
             lockstep = np.mean(ENVS * STEPS / seconds.max(axis=0) / base_pace)
             assert run["lockstep_efficiency"] == pytest.approx(lockstep)
             assert run["lockstep_efficiency"] <= run["pace_ratio"] + 1e-9  # never above the mean
-            expected = ([worker_core(i) for i in range(run["procs"])] if name == "pinned"
-                        else [None] * run["procs"])
-            assert run["cores"] == expected
         assert mode["pace_ratio"][0] == 1.0
         assert mode["lockstep_efficiency"][0] == pytest.approx(1.0)  # 1 process: its own mean
 
 
 def test_summary_of_known_seconds():
-    run = {"procs": 2, "pinned": False, "cores": [None, None],
-           "seconds": [[1.0, 2.0], [2.0, 2.0]]}  # 10 steps a segment
+    run = {"procs": 2, "seconds": [[1.0, 2.0], [2.0, 2.0]]}  # 10 steps a segment
     summary = cores.summarise(run, 10, baseline_pace=10.0)
     assert summary["pace_per_process"] == pytest.approx([7.5, 5.0])
     assert summary["pace_mean"] == pytest.approx(6.25) and summary["pace_slowest"] == 5.0

@@ -182,7 +182,6 @@ ROWS = [
     _row(f"bench cores {BENCH_REPORT} --procs 1,1", "--procs", "1 more than once"),
     _row(f"bench cores {BENCH_REPORT} --envs-per-worker 0", "--envs-per-worker"),
     _row(f"bench cores {BENCH_REPORT} --segments 0", "--segments"),
-    _row(f"bench cores {BENCH_REPORT} --pin sometimes", "--pin"),
     _row(f"bench cores {BENCH_REPORT} --task nosuch_task", "--task nosuch_task", "no such task"),
     _row(f"bench scale {BENCH_REPORT} --workers 0", "--workers"),
     _row(f"bench scale {BENCH_REPORT} --workers 1,x", "--workers"),
@@ -216,7 +215,22 @@ ROWS = [
 ]
 
 # The learner's device: a malformed one (a device the machine lacks: tests/test_bench_scale.py).
-ROWS += [_row(f"train --device gpu {OUT}", "--device 'gpu'")]
+# The outcome model's data and fit (issue 52): the proposing run is a shipped one.
+PROPOSER = str(Path(__file__).resolve().parents[1] / "models" / "weights" / "push_turn_primitive")
+ROWS += [
+    _row(f"collect-outcomes {PROPOSER} --objects {{root}}/nosuch --episodes 1 {OUT}/c",
+         "{root}/nosuch"),
+    _row(f"collect-outcomes {PROPOSER} --objects {{root}}/lib --episodes 0 {OUT}/c",
+         "--episodes"),
+    _row(f"collect-outcomes {{root}}/nosuch_run --objects {{root}}/lib --episodes 1 {OUT}/c",
+         "nosuch_run"),
+    _row(f"fit-outcome {PROPOSER} --data {{root}}/nosuch --out-run {{root}}/out/fit",
+         "--data", "{root}/nosuch"),
+    _row(f"fit-outcome {PROPOSER} --data {{root}}/lib --seed -1 --out-run {{root}}/out/fit",
+         "--seed"),
+    _row(f"fit-outcome {PROPOSER} --data {{root}}/lib --out-run {{root}}/out", "{root}/out"),
+]
+ROWS += [_row(f"train --device gpu {OUT}", "--device: device must be cpu, cpu:N, cuda or cuda:N, got 'gpu'")]
 
 ROWS += [_row(f"train --task {{root}}/{name} {OUT}", "{root}/" + name, detail)
          for name, (_, detail) in BROKEN_CONFIGS.items()]

@@ -224,8 +224,14 @@ def test_push_turn_task_turns_the_goal_and_checks_orientation():
 def test_reset_names_the_task_and_ranges_when_no_goal_fits():
     cfg = _task("push")
     cfg.task.goal_x, cfg.task.goal_y = [0.5, 0.6], [0.5, 0.6]  # off the table: never reachable
+    with pytest.raises(InputError, match=r"goal_x"):  # refused by the config's own check
+        TeacherEnv(cfg)
+    # Every range valid on its own, but no start puts the object that far from the hand on the
+    # table: the sampler names the task and the ranges when the first reset finds no pair.
+    cfg = _task("push")
+    cfg.task.goal.object_distance_to_hand = [0.5, 0.6]
     env = TeacherEnv(cfg)
-    with pytest.raises(InputError, match=r"task 'push'.*task\.goal_x \[0\.5, 0\.6\]"):
+    with pytest.raises(InputError, match=r"task 'push'.*object_distance_to_hand \[0\.5, 0\.6\]"):
         env.reset(seed=0)
 
 

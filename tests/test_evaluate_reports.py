@@ -95,3 +95,5 @@ def test_an_interrupted_evaluate_writes_the_finished_episodes_as_a_partial_repor
         len(report["episodes"])
     # Only whole episodes' recordings: the first episode's, none of an unfinished one.
     assert len(list((tmp_path / "eval_recordings").glob("*.html"))) == 1
+    # The report's lock goes with the interrupted evaluate (storage/file_locks.py).
+    assert not (tmp_path / ".eval.json.lock").exists()

@@ -138,32 +138,3 @@ def test_a_trained_encoder_ignores_a_features_entry():
     with torch.no_grad():
         torch.testing.assert_close(agent(stale)[0], agent(obs)[0])
     assert len(calls) == 2
-
-
-def test_normalised_features_use_the_running_statistics_and_travel_in_the_state_dict():
-    """TrainConfig.normalize_features: the head sees the encoder's features standardised per
-    dimension by statistics the agent updates from its batches and saves with its weights."""
-    torch.manual_seed(0)
-    encoder = make_policy_encoder("corn")
-    agent = TeacherAgent("corn", encoder, normalize_features=True)
-    plain = TeacherAgent("corn", make_policy_encoder("corn"))
-    plain.load_state_dict({k: v for k, v in agent.state_dict().items()
-                           if not k.startswith("feature_normalizer.")})
-    obs = obs_to_tensors(RandomEnvs(4).reset())
-    with torch.no_grad():
-        obs["features"] = agent.features(obs)
-        agent.update_normalizers(obs)
-        tokens = obs["features"].reshape(-1, obs["features"].shape[-1])
-        torch.testing.assert_close(agent.feature_normalizer.mean.float(), tokens.mean(0),
-                                   atol=1e-5, rtol=0)
-        # The same network on standardised features: what the plain agent gives on them.
-        scaled = {**obs, "features": agent.feature_normalizer.normalize(obs["features"])}
-        plain.context_normalizer.load_state_dict(agent.context_normalizer.state_dict())
-        torch.testing.assert_close(agent(obs)[0], plain(scaled)[0])
-        assert not torch.allclose(agent(obs)[0], plain(obs)[0])
-    loaded = TeacherAgent("corn", make_policy_encoder("corn"), normalize_features=True)
-    loaded.load_state_dict(agent.state_dict())
-    torch.testing.assert_close(loaded.feature_normalizer.var, agent.feature_normalizer.var)
-    # A checkpoint of either kind does not load into the other silently.
-    with pytest.raises(Exception, match="feature_normalizer"):
-        plain.load_saved_state(agent.state_dict(), "run/last.pt")

@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from corn_drake.commands.gallery import montage
-from corn_drake.commands.ship import _check_report, library_arguments
+from corn_drake.commands.ship import library_arguments
+from corn_drake.evaluation.shipping import check_measured_weights
+from corn_drake.evaluation.shipping import check_report as _check_report
 from corn_drake.errors import InputError
 from corn_drake.viz.gallery import pick_steps, paint
 
@@ -60,3 +62,27 @@ def test_a_card_quotes_only_its_own_runs_unseen_report(tmp_path):
         _check_report({**report, "checkpoint": "step_000051200.pt"}, runs, "r.json")
     with pytest.raises(InputError, match="success_rate"):
         _check_report({k: v for k, v in report.items() if k != "success_rate"}, runs, "r.json")
+
+
+def test_a_card_quotes_only_a_report_of_the_weights_it_ships():
+    """A report records the checkpoint file and env steps it measured; ship compares them with
+    the weights it packs (issue 53: a report at 3,200 steps went out with 3,520-step weights)."""
+    import io
+
+    report = {"env_steps": 3200, "checkpoint": "last.pt"}
+    check_measured_weights(report, "r.json", "runs/x", 3200, "last.pt")
+    with pytest.raises(InputError) as refused:
+        check_measured_weights(report, "r.json", "runs/x", 3520, "last.pt")
+    message = str(refused.value)
+    assert "\n" not in message and "r.json" in message and "runs/x" in message
+    assert "3200" in message and "3520" in message
+    # The run's last.pt was unusable and ship would pack prev.pt: not the file measured.
+    with pytest.raises(InputError, match="prev.pt"):
+        check_measured_weights(report, "r.json", "runs/x", 3200, "prev.pt")
+    # A report from before `checkpoint` was recorded measured last.pt (all evaluate read then).
+    check_measured_weights({"env_steps": 3200}, "r.json", "runs/x", 3200, "last.pt")
+    # One from before env_steps was recorded cannot be checked: accepted, with a warning line.
+    stream = io.StringIO()
+    check_measured_weights({}, "old.json", "runs/x", 3520, "last.pt", stream=stream)
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: --report old.json records no env_steps")

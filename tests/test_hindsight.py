@@ -1,9 +1,9 @@
 """Hindsight goals for the primitive learner (rl/primitive/hindsight.py, nn/primitive_features.with_goal):
 features rewritten for another goal equal the features of an observation with that goal; the
 relabelled reward of the episode's own goal is PrimitiveEnv's reward (an independent
-computation: the env's from the plant's pose and the object's corners or body cloud; the cloud
-distance also from the observation's world cloud alone); a finished episode's
-copies end with its reached poses as successes; a run stores them without counting them."""
+computation: the env's from the plant's pose and the object's corners); a finished episode's
+copies end with its reached poses as successes, the pose it left the workspace at included; a
+run stores them without counting them."""
 
 import numpy as np
 import pytest
@@ -11,14 +11,13 @@ import torch
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig, PrimitiveTrainConfig
-from corn_drake.errors import InputError
 from corn_drake.nn.primitive_features import location_features, with_goal
 from corn_drake.package_data import data_dir
 from corn_drake.rl.primitive.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
-                                     relative_goal, reward, succeeded)
+                                     relative_goal, reward, rotation_to, succeeded)
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-from corn_drake.transforms import from_pose9, pose9
+from corn_drake.transforms import pose9
 
 ENCODER = data_dir("models") / "weights" / "push_corn" / "encoder.pt"
 
@@ -29,8 +28,7 @@ def _rotation(rng) -> np.ndarray:
     return q * np.linalg.det(q)
 
 
-@pytest.mark.parametrize("locations", ["patch", "point"])
-def test_features_with_another_goal_equal_the_features_of_that_goal(locations):
+def test_features_with_another_goal_equal_the_features_of_that_goal():
     rng = np.random.default_rng(0)
     encoder = load_encoder("corn", ENCODER)
     B, N = 2, 512
@@ -51,8 +49,8 @@ def test_features_with_another_goal_equal_the_features_of_that_goal(locations):
     first = {k: v.float() for k, v in first.items()}
     second = {k: v.float() for k, v in second.items()}
     with torch.no_grad():
-        have, _ = location_features(encoder, first, locations)
-        want, _ = location_features(encoder, second, locations)
+        have, _ = location_features(encoder, first)
+        want, _ = location_features(encoder, second)
     have = {k: v.numpy() for k, v in have.items()}
     rewritten = with_goal(have, np.stack([p for p, _ in goals[B:]]),
                           np.stack([R for _, R in goals[B:]]))
@@ -63,13 +61,15 @@ def test_features_with_another_goal_equal_the_features_of_that_goal(locations):
     np.testing.assert_array_equal(rewritten["tokens"], have["tokens"])
 
 
-def _own_goal(obs, key: str = "object_keypoints") -> Achieved:
-    """The episode's own goal as an Achieved state, from one observation (unbatched), with the
-    points of observation `key` (the corners or the cloud)."""
+KEYS = ("object_position", "goal", "object_keypoints")
+
+
+def _own_goal(obs) -> Achieved:
+    """The episode's own goal as an Achieved state, from one observation (unbatched)."""
     p = np.asarray(obs["object_position"], float)
-    state = achieved_states({k: obs[k][None] for k in ("object_position", "goal", key)}, key)[0]
+    state = achieved_states({k: obs[k][None] for k in KEYS})[0]
     p_goal = p + np.asarray(obs["goal"][:3], float)
-    points = (np.asarray(obs[key], float).reshape(-1, 3) - p) \
+    points = (np.asarray(obs["object_keypoints"], float).reshape(-1, 3) - p) \
         @ state.goal_rotation.T  # the points turned as the goal turns them
     points[:, :2] += p_goal[:2]
     return Achieved(p_goal, np.eye(3), points)
@@ -84,41 +84,19 @@ def _turning_push(env, obs) -> dict:
     return {"point": index, "motion": 0.6 * inward + 0.6 * np.array([-normal[1], normal[0], 0])}
 
 
-def _cloud_distance(obs, goal_pose) -> float:
-    """Mean distance between the observation's cloud and the same body points placed at
-    `goal_pose` ([p, q_wxyz]), the height of the object's origin dropped; from the observation
-    alone (the env's cloud_distance reads the plant's pose and the body-frame cloud)."""
-    p = np.asarray(obs["object_position"], float)
-    R_goal_R_t = from_pose9(np.asarray(obs["goal"], float))[1]  # R_goal R^T
-    cloud = np.asarray(obs["cloud"], float)
-    at_goal = (cloud - p) @ R_goal_R_t.T + [goal_pose[0], goal_pose[1], 0.0]
-    return float(np.linalg.norm(cloud - [0.0, 0.0, p[2]] - at_goal, axis=1).mean())
-
-
-@pytest.mark.parametrize("reward_points", ["keypoints", "cloud"])
-def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward(reward_points):
-    primitive = PrimitiveConfig(turn_reward=2.0, reward_points=reward_points)
+def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward():
+    # A push at the contact point's own height, vertical fingers: _turning_push then turns the
+    # box (a low push with leaning fingers slides it), so the relabelled rotation is tested too.
+    primitive = PrimitiveConfig(push_height=0.0, finger_tilt_deg=0.0)
     env = PrimitiveEnv(load_primitive_env_config("push_turn"), primitive)
     rule = HindsightRule.for_run(1, primitive, env.cfg.task)
-    key = rule.points_key
     obs, _ = env.reset(seed=2)
-    rotation_before = env.rotation_to_goal()
     nxt, env_reward, terminated, _, info = env.step(_turning_push(env, obs))
     assert not terminated and info["status"]["success"] == 0
-    assert abs(env.rotation_to_goal() - rotation_before) > 0.01  # it did turn
-    if reward_points == "cloud":  # the env's distance, from the observation's own cloud
-        goal_pose = np.asarray(env.episode.goal_pose, float)
-        assert env.cloud_distance() == pytest.approx(_cloud_distance(nxt, goal_pose), abs=1e-5)
-        assert env_reward == pytest.approx(primitive.progress_reward * (
-            _cloud_distance(obs, goal_pose) - _cloud_distance(nxt, goal_pose)) + 2.0 * (
-            rotation_before - env.rotation_to_goal()), abs=1e-4)
-        # The two rewards differ: the cloud's points are not the box's corners.
-        assert env.cloud_distance() != pytest.approx(env.keypoint_distance(), abs=1e-3)
-    [before], [after] = (achieved_states({k: o[k][None] for k in
-                                          ("object_position", "goal", key)}, key)
-                         for o in (obs, nxt))
-    goal = _own_goal(obs, key)
-    np.testing.assert_allclose(_own_goal(nxt, key).points, goal.points, atol=1e-5)
+    [before], [after] = (achieved_states({k: o[k][None] for k in KEYS}) for o in (obs, nxt))
+    goal = _own_goal(obs)
+    assert abs(rotation_to(after, goal) - rotation_to(before, goal)) > 0.01  # it did turn
+    np.testing.assert_allclose(_own_goal(nxt).points, goal.points, atol=1e-5)
     # The goal relative to each state, as its observation holds it.
     for state, o in ((before, obs), (after, nxt)):
         position, rotation = relative_goal(state, goal)
@@ -130,9 +108,7 @@ def test_the_relabelled_reward_of_the_own_goal_is_the_envs_reward(reward_points)
     assert reached > env.cfg.task.success_reward
     assert reached == pytest.approx(
         rule.success_reward + rule.progress_reward * float(np.linalg.norm(
-            before.points - after.points, axis=1).mean()) + rule.turn_reward * float(
-            np.arccos(np.clip((np.trace(after.goal_rotation.T @ before.goal_rotation) - 1) / 2,
-                              -1, 1))), abs=1e-6)
+            before.points - after.points, axis=1).mean()), abs=1e-6)
 
 
 def _cfg(**changes) -> PrimitiveTrainConfig:
@@ -214,11 +190,6 @@ def test_an_at_rest_runs_collector_relabels_with_the_final_speeds(tmp_path):
         np.testing.assert_allclose(copies.rewards[last], copies.rewards[last][0], atol=1e-6)
 
 
-def test_hindsight_goals_refuse_the_tipping_penalty():
-    with pytest.raises(InputError, match="hindsight_goals.*tip_penalty"):
-        _cfg(primitive=PrimitiveConfig(tip_penalty=1.0)).check()
-
-
 def test_at_rest_a_relabelled_success_needs_the_object_still():
     """With success_at_rest the run's rule asks the object's speed at the primitive's end, as
     the env does: the same pose reached while sliding is no success, reached still it is; a
@@ -264,13 +235,12 @@ def test_the_env_observes_the_speed_hindsight_judges_rest_by(tmp_path):
     np.testing.assert_allclose(state.speed, obs["object_speed"])
 
 
-def _episode_leaving_the_workspace(exit_goals: bool, exit_penalty: float = 0.0) -> dict:
+def _episode_leaving_the_workspace() -> dict:
     """The copies of a hand-made 3-primitive episode whose last push threw the object 0.6 m
-    away (the env ended it there without success), under a rule with `exit_goals`."""
-    rule = HindsightRule(goals=8, progress_reward=10.0, turn_reward=0.0, success_reward=1.0,
+    away (the env ended it there without success)."""
+    rule = HindsightRule(goals=8, progress_reward=10.0, success_reward=1.0,
                          success_position=0.05, success_orientation=0.25,
-                         check_orientation=True, exit_goals=exit_goals,
-                         exit_penalty=exit_penalty)
+                         check_orientation=True)
     corners = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.03, 0.03)
                         for z in (0.0, 0.04)])
 
@@ -287,38 +257,13 @@ def _episode_leaving_the_workspace(exit_goals: bool, exit_penalty: float = 0.0) 
     return episodes.finish(0, succeeded_=False, relabel=True, rng=np.random.default_rng(0))
 
 
-def test_a_pose_outside_the_workspace_is_a_goal_only_when_the_rule_allows_it():
-    kept = _episode_leaving_the_workspace(exit_goals=True)
-    # Every copy of the push that threw the object out takes that pose: a success each time.
-    thrown = kept["locations"] == 2
-    assert thrown.sum() == 8 and (kept["rewards"][thrown] > 1.0).all()
-    assert kept["terminated"][thrown].all()
-    left = _episode_leaving_the_workspace(exit_goals=False)
-    # No copy of that push; the earlier ones take only poses within the workspace as goals
-    # (goal positions relative to the state: 0.04 or 0.08 m ahead, never 0.6 m).
-    assert sorted(set(left["locations"].tolist())) == [0, 1]
-    assert len(left["locations"]) == 2 * 8
-    ahead = left["features"]["global"][:, 0] / 10.0  # the relative goal's x, decimetres
-    assert np.abs(ahead).max() < 0.1 + 1e-6
-    assert (kept["features"]["global"][:, 0] / 10.0).max() > 0.5
-    # The last in-workspace pose, taken by the second push: a success that ends the copy.
-    second = left["locations"] == 1
-    assert (left["rewards"][second] > 1.0).all() and left["terminated"][second].all()
-
-
-def test_the_push_that_left_the_workspace_loses_the_exit_penalty_in_every_copy():
-    plain = _episode_leaving_the_workspace(exit_goals=True)
-    penalised = _episode_leaving_the_workspace(exit_goals=True, exit_penalty=0.7)
-    thrown = plain["locations"] == 2
-    np.testing.assert_allclose(penalised["rewards"][thrown], plain["rewards"][thrown] - 0.7,
-                               atol=1e-6)
-    np.testing.assert_array_equal(penalised["rewards"][~thrown], plain["rewards"][~thrown])
-
-
-def test_an_unknown_reward_points_choice_is_refused_by_the_run_and_the_env():
-    with pytest.raises(InputError, match="primitive.reward_points must be one of keypoints, "
-                                         "cloud, got 'flow'"):
-        _cfg(hindsight_goals=0, primitive=PrimitiveConfig(reward_points="flow")).check()
-    with pytest.raises(InputError, match="reward_points.*'corners'"):
-        PrimitiveEnv(load_primitive_env_config("push_turn"),
-                     PrimitiveConfig(reward_points="corners"))
+def test_a_pose_outside_the_workspace_is_a_goal_too():
+    copies = _episode_leaving_the_workspace()
+    # Every copy of the push that threw the object out takes that pose: a success each time,
+    # and the end of the copy (the env ended the episode there).
+    thrown = copies["locations"] == 2
+    assert thrown.sum() == 8 and (copies["rewards"][thrown] > 1.0).all()
+    assert copies["terminated"][thrown].all()
+    # The earlier pushes' copies may take it too (0.6 m ahead of them).
+    assert (copies["features"]["global"][:, 0] / 10.0).max() > 0.5
+    assert len(copies["locations"]) == 3 * 8

@@ -45,7 +45,14 @@ def test_a_signalled_training_run_ends_in_one_line_and_resumes(tmp_path, sig, wo
     wait_until(lambda: checkpoint.exists() or proc.poll() is not None, "the first checkpoint",
                poll_s=0.2)
     assert checkpoint.exists(), proc.communicate()[1]
-    os.killpg(proc.pid, sig)
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)  # Ctrl-C: the whole group (Ray's own processes block SIGINT)
+    else:
+        # SIGTERM as `kill PID`, systemd or docker send it: to the command alone. Sent to the
+        # group it also kills Ray's raylet and object store (they share the group and do not
+        # block SIGTERM), and then which comes first, the command's handler or Ray's core
+        # exiting on its lost objects (exit 1, no line), depends on the load (issue 53).
+        os.kill(proc.pid, sig)
     _, stderr = proc.communicate()
     assert proc.returncode == 128 + sig, stderr
     _assert_clean_end(stderr, signal.Signals(sig).name)

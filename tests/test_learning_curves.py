@@ -125,10 +125,10 @@ def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path, monkeypatch
     report = tmp_path / "p.json"
     assert main(["bench", "policies", "--policies", "state,corn", "--envs-per-worker", "2", "--updates", "1",
                  "--warmup-updates", "0", "--rollout-steps", "4", "--torch-threads", "1",
-                 "--set", "ppo.separate_critic=true", "--report", str(report)]) == 0
+                 "--set", "ppo.separate_critic=false", "--report", str(report)]) == 0
     results = json.loads(report.read_text())["results"]
-    assert results["torch_threads"] == 1 and results["ppo_sets"] == ["ppo.separate_critic=true"]
-    assert trained == [("state", True), ("corn", True)]  # the --set reached every run
+    assert results["torch_threads"] == 1 and results["ppo_sets"] == ["ppo.separate_critic=false"]
+    assert trained == [("state", False), ("corn", False)]  # the --set reached every run
     assert set(results["train_steps_per_s"]) == {"state", "corn"}
     assert all(r > 0 for r in results["train_steps_per_s"].values())
     assert results["relative_to_reference"]["state"] == 1.0 and results["reference"] == "state"

@@ -10,13 +10,19 @@ import pytest
 import torch
 
 from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.primitive.outcome.lookahead import candidate_primitives, lookahead_step
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
 
+# Pushes at the chosen point's own height with vertical fingers: _side_push then slides the
+# box 9 cm (the shipped low push with leaning fingers hardly moves it from this side point).
+AT_THE_POINT = {"push_height": 0.0, "finger_tilt_deg": 0.0}
+
+
 def _env() -> PrimitiveEnv:
-    return PrimitiveEnv(load_primitive_env_config("push"))
+    return PrimitiveEnv(load_primitive_env_config("push"), PrimitiveConfig(**AT_THE_POINT))
 
 
 def _side_push(obs: dict, scale: float = 0.5) -> dict:
@@ -123,7 +129,7 @@ def test_the_agents_choice_carries_every_locations_motion():
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(0)
-    agent = PrimitiveAgent(make_policy_encoder("corn"), "patch").eval()
+    agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
     env = _env()
     obs, _ = env.reset(seed=2)
     choice = agent.choose(obs)
@@ -138,11 +144,9 @@ def _push_through_goal(at_rest: bool):
     (3 cm tolerance): the box passes through the goal mid-push and comes to rest beyond it."""
     import dataclasses
 
-    from corn_drake.config.primitive import PrimitiveConfig
-
     cfg = load_primitive_env_config("push")
     cfg.task.success_position = 0.03
-    env = PrimitiveEnv(cfg, PrimitiveConfig(success_at_rest=at_rest))
+    env = PrimitiveEnv(cfg, PrimitiveConfig(success_at_rest=at_rest, **AT_THE_POINT))
     obs, _ = env.reset(seed=2)
     start, snapshot = env.object_pose(), env.snapshot()
     push = _side_push(obs, 1.0)
@@ -181,18 +185,16 @@ def test_at_rest_a_still_object_at_the_goal_is_a_success():
     goal[:3] = end[:3]
     source.get_mutable_source_value(source.GetMyMutableContextFromRoot(env.context)).set_value(
         goal)
-    before = env.progress_distance()
+    before = env.keypoint_distance()
     _, reward, terminated, _, info = env.step(push)
     assert terminated and info["status"]["success"] > 0 and env.object_still()
-    progress = env.primitive_cfg.progress_reward * (before - env.progress_distance())
+    progress = env.primitive_cfg.progress_reward * (before - env.keypoint_distance())
     assert reward == pytest.approx(progress + env.cfg.task.success_reward)
 
 
 def test_at_rest_the_policy_inside_the_diagram_is_judged_by_the_same_rule():
     """The in-diagram path's verdict (evaluate's): a success with the executor busy is revoked
     and the episode goes on; idle with the object still, it stands."""
-    from corn_drake.config.primitive import PrimitiveConfig
-
     env = PrimitiveEnv(load_primitive_env_config("push"), PrimitiveConfig(success_at_rest=True))
     env.reset(seed=2)
     assert env.object_still()

@@ -49,8 +49,8 @@ def test_a_side_point_is_lowered_to_the_push_height_keeping_its_side():
     # The executor's pre-contact point (point + distance * normal) lands at the push height.
     pre = point + LOW.pre_contact_distance * normal
     assert pre[2] == pytest.approx(TABLE_TOP_Z + LOW.push_height)
-    # push_height 0 (the default): the chosen point itself.
-    same, _ = push_contact(cloud, normals, i, PrimitiveConfig())
+    # push_height 0: the chosen point itself.
+    same, _ = push_contact(cloud, normals, i, PrimitiveConfig(push_height=0.0))
     np.testing.assert_array_equal(same, cloud[i])
 
 
@@ -166,9 +166,9 @@ def test_a_tall_box_tips_under_the_palm_and_slides_pushed_low_with_leaning_finge
     """With vertical fingers the palm (2.1 cm deeper than the fingers, 4.5 cm above the tool
     point) meets the box first and tips it, even with the fingers lowered to 2 cm; lowered
     fingers leaning 30 degrees (the palm leaning away) slide it upright."""
-    reached, _, tilt = _push_tall_box(PrimitiveConfig())
+    reached, _, tilt = _push_tall_box(PrimitiveConfig(push_height=0.0, finger_tilt_deg=0.0))
     assert reached and tilt > 0.5  # toppled (the failure table's tipped rule)
-    reached, _, tilt = _push_tall_box(PrimitiveConfig(push_height=0.02))
+    reached, _, tilt = _push_tall_box(PrimitiveConfig(push_height=0.02, finger_tilt_deg=0.0))
     assert reached and tilt > 0.5
     reached, moved, tilt = _push_tall_box(PrimitiveConfig(push_height=0.02, finger_tilt_deg=30,
                                                           approach_steps=30))

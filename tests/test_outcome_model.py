@@ -90,7 +90,7 @@ def test_the_predicted_reward_of_a_known_outcome_is_the_envs_rule(case):
 
 
 def _synthetic_data(states: int, rng) -> dict:
-    """Collected-data arrays (rl/lookahead_distill's layout) of a world where every push moves
+    """Collected-data arrays (rl/primitive/outcome/collect.stack_states' layout) of a world where every push moves
     the object half the push's planar length along its heading and never turns it."""
     per = 12
     quats = np.tile([1.0, 0, 0, 0], (states, 1))
@@ -175,32 +175,6 @@ def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
     assert choice["point"] == choice["candidates"][choice["location"]]
 
 
-def test_the_model_is_told_the_push_as_executed_with_less_vertical_push():
-    """primitive.vertical_push scales the executed push's height: the candidates the model
-    scores carry that push, the options the policy returns the action itself."""
-    import dataclasses
-
-    from corn_drake.nn.encoder_files import make_policy_encoder
-    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
-    from corn_drake.rl.primitive.agent import PrimitiveAgent
-    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-
-    torch.manual_seed(0)
-    agent = PrimitiveAgent(make_policy_encoder("corn")).eval()
-    obs, _ = PrimitiveEnv(load_primitive_env_config("push"), agent=agent).reset(seed=1)
-    chooser = OutcomeChooser(OutcomeModel(INPUTS).eval(), tokens=False)
-    actions = {}
-    for vertical in (1.0, 0.25):
-        agent.primitive_config = dataclasses.replace(agent.primitive_config,
-                                                     vertical_push=vertical)
-        candidates, options, _, _ = chooser.candidates(agent, obs)
-        actions[vertical] = np.stack([motion for _, _, motion in options])
-        np.testing.assert_allclose(candidates.motion,
-                                   actions[vertical] * np.array([1.0, 1.0, vertical]))
-    np.testing.assert_array_equal(actions[1.0], actions[0.25])
-    assert np.abs(actions[1.0][:, 2]).max() > 0.5  # the bank's heights are there to scale
-
-
 def test_bad_model_files_are_refused_by_name(tmp_path):
     missing = tmp_path / "outcome_model.pt"
     with pytest.raises(MissingInputError, match="outcome_model.pt"):
@@ -226,7 +200,6 @@ def test_a_model_of_object_relative_inputs_learns_pushes_and_its_file_says_what_
     synthetic world's pushes from them, its file records the kind and the chooser feeds it the
     same features (its scores are the model's own predicted rewards); an unknown kind is refused
     by name, and a file from before kinds were recorded reads as "raw"."""
-    from corn_drake.config.primitive import OutcomeChoiceConfig
     from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
     from corn_drake.rl.primitive.outcome.model import INPUT_KINDS, box_contact_features
 
@@ -247,8 +220,7 @@ def test_a_model_of_object_relative_inputs_learns_pushes_and_its_file_says_what_
     save_outcome_model(path, model, tokens=False, input_kind="box_contact", states=64)
     parts = load_outcome_parts(path)
     assert parts.facts["input_kind"] == "box_contact"
-    chooser = OutcomeChooser(parts.models, False, parts.facts)
-    chooser.use(OutcomeChoiceConfig())
+    chooser = OutcomeChooser(parts.model, False, parts.facts)
     task = load_primitive_env_config("push_turn").task
     np.testing.assert_allclose(chooser.scores(c, task, 10.0),
                                predicted_rewards(c, frames, predicted, task, 10.0), rtol=1e-6)
@@ -262,7 +234,7 @@ def test_a_model_of_object_relative_inputs_learns_pushes_and_its_file_says_what_
     assert load_outcome_parts(old).facts["input_kind"] == "raw" == INPUT_KINDS[0]
 
 
-# --- ensembles, pessimism and the tilt veto (item 38) ------------------------------------------
+# --- the chooser's arithmetic, and files from before the retired settings --------------------
 class _TableModel(torch.nn.Module):
     """Stands in for an OutcomeModel in the chooser's arithmetic: candidate i's planar
     displacement is row i of a table (push frame, metres), never a turn."""
@@ -289,137 +261,46 @@ def _pushes_along_x(aim_heights, goal_x: float = 0.3) -> Candidates:
                       tokens=np.zeros((n, 4)))
 
 
-def test_pessimism_prefers_the_candidate_the_members_agree_on():
-    """Candidate 0: one member says it carries the box 10 cm toward the goal, the other 3 cm
-    away; candidate 1: both say 3 cm toward. The mean takes the promise (0.35 > 0.30 of
-    progress), one deviation of pessimism the agreement; one model scores as before."""
-    from corn_drake.config.primitive import OutcomeChoiceConfig
+def test_the_chooser_scores_each_candidate_by_its_predicted_reward():
+    """Candidate 0 carries the box 10 cm toward the goal, candidate 1 3 cm: each one's score is
+    its predicted reward (progress x the closed metres), bit for bit, and the first wins."""
     from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
 
     task, progress = load_primitive_env_config("push").task, 10.0
     c = _pushes_along_x([0.0, 0.0])
-    members = [_TableModel([[0.10, 0, 0], [0.03, 0, 0]]),
-               _TableModel([[-0.03, 0, 0], [0.03, 0, 0]])]
+    model = _TableModel([[0.10, 0, 0], [0.03, 0, 0]])
     x, now, frames = model_inputs(c, tokens=False)
-    rewards = np.stack([predicted_rewards(c, frames, m(x, now), task, progress)
-                        for m in members], 1)
-    assert rewards[:, 1] == pytest.approx([-0.3, 0.3], abs=1e-5)  # progress x the closed metres
-    chooser = OutcomeChooser(members, tokens=False)
-    assert np.array_equal(chooser.scores(c, task, progress), rewards.mean(1))
-    assert np.argmax(chooser.scores(c, task, progress)) == 0
-    chooser.use(OutcomeChoiceConfig(pessimism=1.0))
-    assert chooser.scores(c, task, progress) == pytest.approx(rewards.mean(1) - rewards.std(1))
-    assert np.argmax(chooser.scores(c, task, progress)) == 1
-    assert chooser.facts["pessimism"] == 1.0
-    single = OutcomeChooser(members[0], tokens=False)
-    assert np.array_equal(single.scores(c, task, progress), rewards[:, 0])  # bit for bit
-    with pytest.raises(InputError, match=r"outcome.pessimism 1 needs an ensemble"):
-        single.use(OutcomeChoiceConfig(pessimism=1.0))
-    with pytest.raises(InputError, match=r"outcome.tilt_veto 0.5 needs a tilt classifier"):
-        single.use(OutcomeChoiceConfig(tilt_veto=0.5))
+    rewards = predicted_rewards(c, frames, model(x, now), task, progress)
+    assert rewards == pytest.approx([1.0, 0.3], abs=1e-5)
+    scores = OutcomeChooser(model, tokens=False).scores(c, task, progress)
+    assert np.array_equal(scores, rewards) and np.argmax(scores) == 0
 
 
-def test_a_fitted_tilt_classifier_vetoes_the_pushes_it_expects_to_tip():
-    """Labels "pushed above 5 mm over the box's middle tips it": the classifier fitted to them
-    separates the two, and the veto then passes over a high push the model prefers, unless
-    every candidate is high."""
-    from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
-    from corn_drake.rl.primitive.outcome.tilt_classifier import box_contact_features, fit_tilt_classifier
-
-    heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
-    c = _pushes_along_x(heights)
-    tilted = heights > 0.005
-    classifier = fit_tilt_classifier(box_contact_features(c), tilted, 600, seed=0)
-    p = classifier.probability(c)
-    assert (p[tilted] > 0.5).mean() > 0.9 and (p[~tilted] < 0.5).mean() > 0.9
-    task = load_primitive_env_config("push").task
-    model = _TableModel([[0.10, 0, 0], [0.03, 0, 0]])
-    chooser = OutcomeChooser([model], tokens=False, tilt=classifier)
-    high_low = _pushes_along_x([0.018, -0.018])
-    assert np.argmax(chooser.scores(high_low, task, 10.0)) == 0
-    chooser.use(OutcomeChoiceConfig(tilt_veto=0.5))
-    scores = chooser.scores(high_low, task, 10.0)
-    assert np.argmax(scores) == 1 and scores[0] == -np.inf
-    both_high = chooser.scores(_pushes_along_x([0.018, 0.015]), task, 10.0)
-    assert np.isfinite(both_high).all() and np.argmax(both_high) == 0
-    with pytest.raises(ValueError, match="400 feature rows for 3 labels"):
-        fit_tilt_classifier(box_contact_features(c), tilted[:3], 1, seed=0)
-
-
-def test_the_tilt_blend_weighs_each_reward_by_the_classifiers_tilt_probability():
-    """The same labels as above: with outcome.tilt_blend a candidate's score is (1 - p) x the
-    model's reward + p x the reward the file's data measured for tilts, so the high push the
-    model prefers (1.0 against 0.3) loses to the low one, and no candidate is left out."""
-    from corn_drake.config.primitive import OutcomeChoiceConfig
-    from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
-    from corn_drake.rl.primitive.outcome.tilt_classifier import box_contact_features, fit_tilt_classifier
-
-    heights = np.random.default_rng(0).uniform(-0.02, 0.02, 400)
-    train = _pushes_along_x(heights)
-    classifier = fit_tilt_classifier(box_contact_features(train), heights > 0.005, 600, seed=0)
-    task = load_primitive_env_config("push").task
-    model = _TableModel([[0.10, 0, 0], [0.03, 0, 0]])
-    high_low = _pushes_along_x([0.018, -0.018])
-    chooser = OutcomeChooser([model], tokens=False, facts={"tilted_reward": -0.5},
-                             tilt=classifier)
-    plain = chooser.scores(high_low, task, 10.0)
-    assert plain == pytest.approx([1.0, 0.3], abs=1e-5) and np.argmax(plain) == 0
-    chooser.use(OutcomeChoiceConfig(tilt_blend=True))
-    p = classifier.probability(high_low)
-    scores = chooser.scores(high_low, task, 10.0)
-    assert scores == pytest.approx((1 - p) * plain + p * -0.5, abs=1e-6)
-    assert np.isfinite(scores).all() and np.argmax(scores) == 1
-    assert chooser.facts["tilt_blend"] is True
-    # A file without the measured reward of tilts (fitted before it was recorded), or without a
-    # classifier, cannot blend: one line naming the setting.
-    for facts, tilt in (({}, classifier), ({"tilted_reward": -0.5}, None)):
-        with pytest.raises(InputError, match="outcome.tilt_blend needs a tilt classifier"):
-            OutcomeChooser([model], False, facts, tilt).use(OutcomeChoiceConfig(tilt_blend=True))
-
-
-def test_an_ensemble_file_holds_its_members_and_tilt_classifier(tmp_path):
-    from corn_drake.rl.primitive.outcome.tilt_classifier import TiltClassifier
-
+def test_a_file_written_with_an_ensemble_and_a_tilt_classifier_loads_its_model(tmp_path):
+    """Files fitted for the retired outcome.pessimism / tilt_veto / tilt_blend hold further
+    members, a tilt classifier and the reward of tilts: reading takes the model and leaves the
+    rest out, so such a folder chooses as one without them."""
     torch.manual_seed(0)
-    models = [OutcomeModel(INPUTS) for _ in range(3)]
-    for m in models:
-        torch.nn.init.normal_(m.net[-1].weight, std=0.1)
-    tilt = TiltClassifier(18)
-    tilt.mean.uniform_()
+    model = OutcomeModel(INPUTS)
+    torch.nn.init.normal_(model.net[-1].weight, std=0.1)
     path = tmp_path / "ensemble.pt"
-    save_outcome_model(path, models[0], False, models[1:], tilt, states=5)
-    parts = load_outcome_parts(path)
-    assert len(parts.models) == 3 and parts.facts["members"] == 3 and parts.facts["states"] == 5
-    x = torch.randn(4, INPUTS)
-    now = torch.randn(4, 8, 3)
-    with torch.no_grad():
-        for mine, theirs in zip(parts.models, models):
-            assert torch.equal(mine(x, now)[0], theirs(x, now)[0])
-        features = torch.randn(4, 18)
-        assert torch.equal(parts.tilt(features), tilt.eval()(features))
-    # A classifier that does not fit its recorded input size is refused naming the file.
+    save_outcome_model(path, model, False, states=5)
     state = torch.load(path, weights_only=False)
-    torch.save({**state, "tilt_inputs": 5}, path)
-    with pytest.raises(InputError, match="ensemble.pt: the tilt classifier's weights do not fit"):
-        load_outcome_parts(path)
-    # A file written before ensembles (one model, no tilt classifier) loads as one model.
-    for key in ("members", "tilt", "tilt_inputs"):
-        del state[key]
-    torch.save(state, path)
+    torch.save({**state, "members": [OutcomeModel(INPUTS).state_dict()],
+                "tilt": {"mean": torch.zeros(18)}, "tilt_inputs": 18, "tilted_reward": -0.5},
+               path)
     parts = load_outcome_parts(path)
-    assert len(parts.models) == 1 and parts.tilt is None and parts.facts["members"] == 1
+    assert parts.facts["states"] == 5
+    assert not {"members", "tilt", "tilt_inputs", "tilted_reward"} & set(parts.facts)
+    x, now = torch.randn(4, INPUTS), torch.randn(4, 8, 3)
+    with torch.no_grad():
+        assert torch.equal(parts.model(x, now)[0], model.eval()(x, now)[0])
 
 
-def test_the_outcome_choice_settings_are_range_checked_where_evaluate_applies_them():
+def test_the_retired_outcome_settings_are_refused_where_evaluate_applies_them():
     from corn_drake.config.diagram_files import primitive_run_on
     from corn_drake.config.primitive import PrimitiveTrainConfig
 
-    base = PrimitiveTrainConfig()
-    cfg = primitive_run_on(base, None, ["outcome.pessimism=2", "outcome.tilt_veto=0.3",
-                                        "outcome.tilt_blend=true"])
-    assert (cfg.outcome.pessimism, cfg.outcome.tilt_veto, cfg.outcome.tilt_blend) == \
-        (2.0, 0.3, True)
-    for bad in ("outcome.tilt_veto=0", "outcome.tilt_veto=1.5", "outcome.pessimism=-1"):
-        with pytest.raises(InputError, match=bad.split("=")[0]):
-            primitive_run_on(base, None, [bad])
+    for retired in ("outcome.pessimism=1", "outcome.tilt_veto=0.5", "outcome.tilt_blend=true"):
+        with pytest.raises(InputError, match=r"outcome was retired \(.*0\.345"):
+            primitive_run_on(PrimitiveTrainConfig(), None, [retired])

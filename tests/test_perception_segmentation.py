@@ -63,10 +63,16 @@ def test_robot_points_removed_when_the_gripper_touches_the_object():
     assert pr["recall"] >= 0.9, pr  # points within robot_margin of the pads go too
 
 
-def test_without_the_robot_link_test_the_robot_leaks_in():
+def test_without_the_robot_link_test_the_robot_leaks_in(monkeypatch):
     """Control for the test above: the link test is what removes the hand."""
+    import corn_drake.systems.segmentation as segmentation
+
+    # The link test switched off (no point is inside any link); a negative robot_margin did
+    # this before the config's bounds refused one.
+    monkeypatch.setattr(segmentation, "inside_primitives",
+                        lambda points, *args: np.zeros(len(points), dtype=bool))
     spec = box_spec([0.09, 0.07, 0.08], 0.3)
-    h = _harness(spec, robot_margin=-1.0)  # shrinks every link primitive to nothing
+    h = _harness(spec)
     h.set_robot(Q_HAND_DOWN)
     h.set_object(RigidTransform([0.0105 + 0.045, 0.0, 0.44]))
     assert h.precision_recall()["non_object_fraction"] > 0.02

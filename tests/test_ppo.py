@@ -23,6 +23,12 @@ class _FlatPolicy(nn.Module):
         return self.net(obs["x"], obs["x"])
 
 
+def _cfg(**settings) -> PPOConfig:
+    """PPO settings for _FlatPolicy, whose value comes from its trunk (no separate critic head:
+    ppo.separate_critic off)."""
+    return PPOConfig(separate_critic=False, **settings)
+
+
 def _batch(policy, n=256, seed=0):
     g = torch.Generator().manual_seed(seed)
     obs = {"x": torch.randn(n, 4, generator=g)}
@@ -53,7 +59,7 @@ def test_gae_matches_hand_computation_with_timeout_bootstrap():
 def test_update_lowers_the_clipped_loss():
     torch.manual_seed(0)
     policy = _FlatPolicy()
-    ppo = PPO(policy, PPOConfig(epochs=4, minibatches=4, kl_target=1.0))
+    ppo = PPO(policy, _cfg(epochs=4, minibatches=4, kl_target=1.0))
     obs, actions, logp, adv, ret = _batch(policy)
     norm_adv = (adv - adv.mean()) / (adv.std() + 1e-8)
     before = ppo.losses(obs, actions, logp, norm_adv, ret)["surrogate"].item()
@@ -66,7 +72,7 @@ def test_update_lowers_the_clipped_loss():
 def test_kl_early_stop_and_lr_adaptation():
     torch.manual_seed(0)
     policy = _FlatPolicy()
-    cfg = PPOConfig(epochs=8, minibatches=4, lr=1e-2, kl_target=1e-6)
+    cfg = _cfg(epochs=8, minibatches=4, lr=1e-2, kl_target=1e-6)
     ppo = PPO(policy, cfg)
     obs, actions, logp, adv, ret = _batch(policy)
     stats = ppo.update(obs, actions, logp, adv, ret, torch.Generator().manual_seed(1))
@@ -75,7 +81,7 @@ def test_kl_early_stop_and_lr_adaptation():
     assert 1 <= stats["minibatches"] < 32
     assert stats["kl"] > cfg.kl_stop_factor * cfg.kl_target
     # KL below half the target raises the lr by 1.5, above twice lowers it (bounded).
-    ppo2 = PPO(_FlatPolicy(), PPOConfig(lr=1e-3))
+    ppo2 = PPO(_FlatPolicy(), _cfg(lr=1e-3))
     ppo2._set_lr(0.0)
     assert abs(ppo2.lr - 1.5e-3) < 1e-12
     ppo2._set_lr(1.0)
@@ -84,7 +90,7 @@ def test_kl_early_stop_and_lr_adaptation():
 
 def test_bound_loss_only_beyond_the_limit():
     policy = _FlatPolicy()
-    ppo = PPO(policy)
+    ppo = PPO(policy, _cfg())
     obs = {"x": torch.zeros(2, 4)}
     with torch.no_grad():
         policy.net.heads.actor[-1].bias.copy_(torch.tensor([1.5, 0.0, -1.0]))
@@ -162,7 +168,7 @@ def test_reward_scaler_state_round_trips():
 def test_lr_goes_down_when_updates_overshoot_the_kl_target():
     torch.manual_seed(0)
     policy = _FlatPolicy()
-    ppo = PPO(policy, PPOConfig(epochs=8, minibatches=4, lr=5e-3, kl_target=1e-4))
+    ppo = PPO(policy, _cfg(epochs=8, minibatches=4, lr=5e-3, kl_target=1e-4))
     obs, actions, logp, adv, ret = _batch(policy)
     ppo.update(obs, actions, logp, adv, ret, torch.Generator().manual_seed(1))
     assert ppo.lr < 5e-3  # overshooting KL lowers the lr instead of pinning it at the maximum
@@ -174,7 +180,7 @@ def test_an_update_cut_short_does_not_leave_a_raised_lr(monkeypatch):
     update while every update is cut short."""
     torch.manual_seed(0)
     policy = _FlatPolicy()
-    cfg = PPOConfig(epochs=8, minibatches=4, lr=1e-3, kl_target=0.016)
+    cfg = _cfg(epochs=8, minibatches=4, lr=1e-3, kl_target=0.016)
     ppo = PPO(policy, cfg)
     real_losses = ppo.losses
     kls = iter([0.0, 0.001, 0.030])  # 0.030: above the stop (0.024), below 2x target (0.032)
@@ -215,12 +221,14 @@ def _reach_rollout(policy, x, generator, steps=10):
 
 
 def test_ppo_with_the_paper_settings_learns_a_reach_task():
-    """Closed loop (rollout -> GAE -> update), the teacher's trunk and PPOConfig defaults: a
-    policy that drives 2-D points to the origin must come out of 40 updates."""
+    """Closed loop (rollout -> GAE -> update), the teacher's trunk and PPOConfig defaults (its
+    value from the trunk): a policy that drives 2-D points to the origin must come out of 40
+    updates."""
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(0)
     policy = _FlatPolicy(obs_dim=2, action_dim=2)  # a 2-D point: obs = its position
-    ppo, cfg = PPO(policy), PPOConfig()
+    cfg = _cfg()
+    ppo = PPO(policy, cfg)
 
     def final_distance() -> float:
         x = torch.rand(256, 2, generator=torch.Generator().manual_seed(99)) * 2 - 1
@@ -253,7 +261,7 @@ def test_loss_weights_are_the_authors():
     returns = torch.linspace(-2.0, 3.0, 64)  # far from the untrained values: a big value term
     with torch.no_grad():
         policy.net.heads.actor[-1].bias.copy_(torch.tensor([1.6, -1.3, 0.2]))
-    losses = PPO(policy).losses(obs, actions, logp, adv, returns)
+    losses = PPO(policy, _cfg()).losses(obs, actions, logp, adv, returns)
     with torch.no_grad():
         mu, value = policy(obs)
         std = policy.log_std.exp()
@@ -268,45 +276,18 @@ def test_loss_weights_are_the_authors():
     torch.testing.assert_close(losses["total"].detach(), expected, rtol=1e-5, atol=1e-6)
 
 
-def test_fan_in_lr_scaling_groups_weights_by_their_fan_in():
-    policy = CrossAttentionActorCritic()
-    ppo = PPO(policy, PPOConfig(lr=1e-4, fan_in_lr_ref=128))
-    scale_of = {id(p): g["lr_scale"] for g in ppo.optimizer.param_groups for p in g["params"]}
-    heads = policy.heads
-    assert scale_of[id(heads.trunk[0].weight)] == pytest.approx(128 / 2096)
-    assert scale_of[id(heads.trunk[3].weight)] == pytest.approx(128 / 512)
-    assert scale_of[id(heads.trunk[0].bias)] == 1.0  # biases and norms keep the lr
-    assert scale_of[id(heads.actor[-1].weight)] == 1.0  # fan-in 64 <= 128
-    assert sum(len(g["params"]) for g in ppo.optimizer.param_groups) == len(list(policy.parameters()))
-    for g in ppo.optimizer.param_groups:
-        assert g["lr"] == pytest.approx(1e-4 * g["lr_scale"])
-    ppo._set_lr(0.0)  # the KL rule moves every group's lr together
-    for g in ppo.optimizer.param_groups:
-        assert g["lr"] == pytest.approx(1.5e-4 * g["lr_scale"])
-    # One Adam step moves the wide layer's weights by about its scaled lr.
-    before = heads.trunk[0].weight.detach().clone()
-    ppo.optimizer.zero_grad()
-    policy(torch.randn(8, 17, 128), torch.randn(8, 48))[0].sum().backward()
-    ppo.optimizer.step()
-    moved = (heads.trunk[0].weight.detach() - before).abs()
-    assert moved.max().item() == pytest.approx(1.5e-4 * 128 / 2096, rel=1e-3)
-
-
-def test_fan_in_lr_scaling_off_is_one_group_and_saved_states_must_agree():
-    policy = _FlatPolicy()
-    plain = PPO(policy, PPOConfig())
-    assert [g["lr_scale"] for g in plain.optimizer.param_groups] == [1.0]
-    scaled = PPO(_FlatPolicy(), PPOConfig(fan_in_lr_ref=2))
-    assert len(scaled.optimizer.param_groups) > 1
-    with pytest.raises(ValueError, match="fan_in_lr_ref"):
-        scaled.load_state_dict(plain.state_dict())
-    # A state saved without lr_scale (before the option) loads into a run with it off.
-    old = plain.state_dict()
-    old = {"optimizer": {**old["optimizer"], "param_groups": [
-        {k: v for k, v in g.items() if k != "lr_scale"} for g in old["optimizer"]["param_groups"]]},
-        "lr": 2e-4}
-    again = PPO(_FlatPolicy(), PPOConfig())
+def test_a_state_saved_with_per_layer_lr_groups_is_refused():
+    """The retired ppo.fan_in_lr_ref wrote lr scales into the optimiser's groups: such a state is
+    refused in one line; one written with every scale 1 (that option off) still loads."""
+    plain = PPO(_FlatPolicy(), _cfg())
+    saved = plain.state_dict()
+    groups = saved["optimizer"]["param_groups"]
+    old = {"optimizer": {**saved["optimizer"], "param_groups": [{**g, "lr_scale": 1.0}
+                                                                for g in groups]}, "lr": 2e-4}
+    again = PPO(_FlatPolicy(), _cfg())
     again.load_state_dict(old)
     assert again.optimizer.param_groups[0]["lr"] == pytest.approx(2e-4)
-    with pytest.raises(ValueError, match="fan_in_lr_ref"):
-        PPO(_FlatPolicy(), PPOConfig(fan_in_lr_ref=-1))
+    scaled = {**old, "optimizer": {**old["optimizer"], "param_groups": [
+        {**g, "lr_scale": 0.25} for g in groups]}}
+    with pytest.raises(ValueError, match="fan_in_lr_ref, which was retired"):
+        PPO(_FlatPolicy(), _cfg()).load_state_dict(scaled)

@@ -20,12 +20,12 @@ from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import DiagramEnv
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.primitive_executor import (DESCEND, IDLE, PUSH, RETREAT, SETTLE,
-                                                   STATUS_LAYOUT, PrimitivePlanner,
-                                                   make_primitive, up_turn)
+from corn_drake.systems.low_push import push_contact
+from corn_drake.systems.primitive_executor import (IDLE, PUSH, RETREAT, SETTLE, STATUS_LAYOUT,
+                                                   PrimitivePlanner, make_primitive)
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 from corn_drake.viz.attention_view import viridis_rgb
-from corn_drake.viz.primitive_view import point_locations, primitive_path
+from corn_drake.viz.primitive_view import nearest_locations, primitive_path
 from tests.recordings import meshcat_messages
 
 # procedural:mug:<seed> of the library's mug_000 (crc32 of "0:mug_000"): CoACD splits it into
@@ -54,6 +54,12 @@ def mug_library(tmp_path_factory):
                           **{key: fields[key] for key in SPEC_FIELDS})
     write_manifest(out, Manifest(objects=[entry]))
     return out
+
+
+# The push at the chosen point's own height with vertical fingers: the hand-picked side points
+# below (_side_point) are reached by it and a full push sets the box sliding; the shipped low
+# push with leaning fingers (PrimitiveConfig's defaults) misses some of them on this box.
+AT_THE_POINT = {"push_height": 0.0, "finger_tilt_deg": 0.0}
 
 
 def _config(obj: str, mug_library=None):
@@ -118,7 +124,7 @@ def _object_moved(env: PrimitiveEnv, before: np.ndarray) -> tuple[float, float]:
 @pytest.mark.parametrize("obj, seed", [("box", 0), ("mug", 2)])
 def test_executor_reaches_the_pre_contact_pose(obj, seed, request):
     mug = request.getfixturevalue("mug_library") if obj == "mug" else None
-    env = PrimitiveEnv(_config(obj, mug))
+    env = PrimitiveEnv(_config(obj, mug), PrimitiveConfig(**AT_THE_POINT))
     if obj == "mug":
         assert len(env.scene.object_spec.hull_paths) == 16
     cfg = env.primitive_cfg
@@ -200,13 +206,12 @@ def test_without_settle_steps_the_retreat_ends_idle_and_keypoints_are_not_needed
     memory, _ = _tick(planner, memory, None)
     assert memory[0] == IDLE
     planner, memory = _planner_after_retreat(3)
-    with pytest.raises(ValueError, match="settle_steps and tilt_stop_deg need the object's"):
+    with pytest.raises(ValueError, match="settle_steps needs the object's keypoints"):
         _tick(planner, memory, None)
 
 
-@pytest.mark.parametrize("field, value", [("settle_steps", -1), ("settle_motion", 0.0),
-                                          ("tilt_stop_deg", -1.0), ("tilt_stop_deg", 91.0)])
-def test_a_primitive_env_refuses_a_settle_or_tilt_setting_out_of_range_by_name(field, value):
+@pytest.mark.parametrize("field, value", [("settle_steps", -1), ("settle_motion", 0.0)])
+def test_a_primitive_env_refuses_a_settle_setting_out_of_range_by_name(field, value):
     with pytest.raises(InputError, match=f"primitive.{field} must be"):
         PrimitiveEnv(_config("box"), PrimitiveConfig(**{field: value}))
 
@@ -216,7 +221,7 @@ def test_a_settling_env_step_returns_with_the_object_still():
     stopped (or the steps are spent), and takes longer than the same step without."""
     results = {}
     for settle in (0, 30):
-        env = PrimitiveEnv(_config("box"), PrimitiveConfig(settle_steps=settle))
+        env = PrimitiveEnv(_config("box"), PrimitiveConfig(settle_steps=settle, **AT_THE_POINT))
         obs, _ = env.reset(seed=0)
         index = _side_point(env, obs)
         _, _, _, _, info = env.step({"point": index, "motion": _inward(obs["normals"][index])})
@@ -224,126 +229,6 @@ def test_a_settling_env_step_returns_with_the_object_still():
         assert results[settle][2] == IDLE
     assert not results[0][1] and results[30][1], results  # sliding at the return, then still
     assert results[30][0] > results[0][0], results
-
-
-# ---------------------------------------------------------------------------- the tilt stop
-
-def _about(axis: str, deg: float) -> np.ndarray:
-    return getattr(RotationMatrix, f"Make{axis.upper()}Rotation")(np.deg2rad(deg)).matrix()
-
-
-TALL_BOX = np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03)
-                     for z in (0.0, 0.2)]) + np.array([0.5, 0.0, TABLE_TOP_Z])
-
-
-@pytest.mark.parametrize("turn, degrees", [
-    (lambda: _about("x", 15), 15.0), (lambda: _about("z", 40), 0.0),
-    (lambda: _about("x", 40) @ _about("z", 70), 40.0),
-    (lambda: _about("z", 70) @ _about("y", 25), 25.0)])
-def test_up_turn_is_how_far_the_box_tilted_whatever_its_yaw(turn, degrees):
-    centre = TALL_BOX.mean(axis=0)
-    after = (TALL_BOX - centre) @ turn().T + centre + np.array([0.03, -0.02, 0.01])
-    assert np.rad2deg(up_turn(TALL_BOX, after)) == pytest.approx(degrees, abs=1e-6)
-
-
-@pytest.mark.parametrize("stop_deg, tilt_deg, stops", [(10.0, 3.0, False), (10.0, 12.0, True),
-                                                       (0.0, 30.0, False)])
-def test_a_push_that_starts_to_tip_the_object_stops_and_the_hand_lifts(stop_deg, tilt_deg,
-                                                                      stops):
-    """The push begins at the pre-contact point with the box's keypoints stored; a tick later
-    the box has tilted: past tilt_stop_deg the hand retreats (upward) at once, else it pushes
-    on (along +x); tilt_stop_deg 0 never stops."""
-    planner = PrimitivePlanner(PrimitiveConfig(tilt_stop_deg=stop_deg), ControllerConfig())
-    tool = np.array([0.44, 0.0, TABLE_TOP_Z + 0.03])
-    memory = planner.initial_memory()
-    # _PHASE, the pre-contact point (_PRE) where the tool is, a 10 cm push along +x (_PUSH).
-    memory[0], memory[6:9], memory[9:12] = DESCEND, tool, (0.1, 0.0, 0.0)
-    memory, _ = _tick(planner, memory, TALL_BOX, tool)
-    assert memory[0] == PUSH
-    edge = TALL_BOX[(TALL_BOX[:, 0] > 0.52) & (TALL_BOX[:, 2] < TABLE_TOP_Z + 0.01)].mean(axis=0)
-    tipped = (TALL_BOX - edge) @ _about("y", tilt_deg).T + edge  # about its far bottom edge
-    memory, action = _tick(planner, memory, tipped, tool)
-    move = action[ACTION_SLICES["position"]]
-    if stops:
-        assert memory[0] == RETREAT and move[2] > 0 and abs(move[0]) < 1e-9, move
-    else:
-        assert memory[0] == PUSH and move[0] > 0 and abs(move[2]) < 1e-9, move
-
-
-# ----------------------------------------------------------------------------------- tipping
-
-def _tipped_goal_step(task: str, tip_penalty: float):
-    """One short push on a box whose episode goal is turned onto another face (90 deg about x),
-    so the box, still on its own face, counts as tipped by the env's rule."""
-    import dataclasses
-
-    from corn_drake.transforms import quat_wxyz_to_matrix
-
-    env = PrimitiveEnv(load_primitive_env_config(task), PrimitiveConfig(tip_penalty=tip_penalty))
-    obs, _ = env.reset(seed=1)
-    goal = np.array(env.episode.goal_pose, float)
-    R = quat_wxyz_to_matrix(goal[3:]) @ np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
-    goal[3:] = RotationMatrix(R).ToQuaternion().wxyz()
-    env.episode = dataclasses.replace(env.episode, goal_pose=goal)
-    index = _side_point(env, obs)
-    return env.step({"point": index, "motion": 0.3 * _inward(obs["normals"][index])})
-
-
-def test_tipping_ends_a_face_keeping_training_episode_with_the_penalty():
-    _, free, free_end, _, free_info = _tipped_goal_step("push", 0.0)
-    _, penalised, end, truncated, info = _tipped_goal_step("push", 1.5)
-    assert not free_end and "tipped" not in free_info
-    assert end and not truncated and info["tipped"]
-    # The same deterministic primitive: the rewards differ by the penalty alone.
-    assert penalised == pytest.approx(free - 1.5, abs=1e-6)
-
-
-def test_the_turn_reward_adds_the_rotation_closed_toward_the_goal():
-    """The same deterministic primitive on push_turn with turn_reward 0 and 2: the rewards
-    differ by 2 x (the rotation to the goal before - after), and the object did turn."""
-    from corn_drake.config.primitive import PrimitiveConfig
-
-    results = []
-    for weight in (0.0, 2.0):
-        env = PrimitiveEnv(load_primitive_env_config("push_turn"),
-                           PrimitiveConfig(turn_reward=weight))
-        obs, _ = env.reset(seed=2)
-        before = env.rotation_to_goal()
-        index = _side_point(env, obs)
-        # An off-centre push turns the box: along the surface and inward.
-        normal = obs["normals"][index]
-        motion = 0.6 * _inward(normal) + 0.6 * np.array([-normal[1], normal[0], 0.0])
-        _, reward, _, _, _ = env.step({"point": index, "motion": motion})
-        results.append((reward, before, env.rotation_to_goal()))
-    (plain, before, after), (weighted, before2, after2) = results
-    assert (before, after) == pytest.approx((before2, after2), abs=1e-9)
-    assert abs(after - before) > 0.01
-    assert weighted - plain == pytest.approx(2.0 * (before - after), abs=1e-6)
-
-
-def test_a_push_off_the_workspace_ends_the_episode_and_costs_the_exit_penalty():
-    """The workspace's +x bound put 2 cm beyond the box's start, and a full +x push: the
-    episode ends out of the workspace, with rewards differing by exactly the penalty."""
-    from corn_drake.config.primitive import PrimitiveConfig
-
-    start = PrimitiveEnv(_config("box")).reset(seed=4)[0]["object_position"]
-    results = []
-    for penalty in (0.0, 1.5):
-        cfg = _config("box")
-        cfg.task.workspace_high = [float(start[0]) + 0.02, 0.55, 0.9]
-        env = PrimitiveEnv(cfg, PrimitiveConfig(exit_penalty=penalty))
-        obs, _ = env.reset(seed=4)
-        np.testing.assert_allclose(obs["object_position"], start, atol=1e-9)
-        index = int(np.argmin(obs["normals"][:, 0] + 3 * np.abs(obs["normals"][:, 2])))
-        _, reward, terminated, _, info = env.step({"point": index, "motion": [1.0, 0.0, 0.0]})
-        assert terminated and info["status"]["out_of_workspace"] > 0
-        results.append(reward)
-    assert results[1] == pytest.approx(results[0] - 1.5, abs=1e-6)
-
-
-def test_tipping_is_no_failure_on_the_6d_task_whose_goals_change_the_face():
-    _, _, end, _, info = _tipped_goal_step("full6d", 1.5)
-    assert not end and "tipped" not in info
 
 
 # ------------------------------------------------------------------------------- unreachable
@@ -373,7 +258,7 @@ def _bottom_primitive(env: PrimitiveEnv, obs: dict) -> dict:
 
 
 def test_a_primitive_into_the_table_is_given_up_without_an_error():
-    env = PrimitiveEnv(_config("box"))
+    env = PrimitiveEnv(_config("box"), PrimitiveConfig(**AT_THE_POINT))
     obs, _ = env.reset(seed=0)
     cfg = env.primitive_cfg
     obs, reward, terminated, truncated, info = env.step(_bottom_primitive(env, obs))
@@ -399,12 +284,12 @@ def test_a_primitive_into_the_table_leaves_the_object_where_it_was():
 
 # ------------------------------------------------------------------------------- the policy
 
-def _agent(seed: int = 0, locations: str = "patch"):
+def _agent(seed: int = 0):
     from corn_drake.nn.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(seed)
-    return PrimitiveAgent(make_policy_encoder("corn"), locations).eval()
+    return PrimitiveAgent(make_policy_encoder("corn")).eval()
 
 
 def _step_until_count(env: PrimitiveEnv, count: int, max_ticks: int = 80) -> dict:
@@ -433,11 +318,10 @@ def _choosing_by_an_outcome_model(agent, task):
     return agent
 
 
-@pytest.mark.parametrize("locations, chooser, settle", [
-    ("patch", "critic", 0), ("point", "critic", 0), ("patch", "outcome_model", 0),
-    ("patch", "critic", 6)])
-def test_the_reported_location_is_the_policys_own_choice(locations, chooser, settle):
-    agent = _agent(locations=locations)
+@pytest.mark.parametrize("chooser, settle", [("critic", 0), ("outcome_model", 0),
+                                             ("critic", 6)])
+def test_the_reported_location_is_the_policys_own_choice(chooser, settle):
+    agent = _agent()
     cfg = _config("box")
     if chooser == "outcome_model":
         agent = _choosing_by_an_outcome_model(agent, cfg.task)
@@ -460,9 +344,10 @@ def test_the_reported_location_is_the_policys_own_choice(locations, chooser, set
         np.testing.assert_allclose(held[2:5], choice["motion"], atol=1e-6)
         np.testing.assert_allclose(policy.GetOutputPort("scores").Eval(ctx), choice["scores"],
                                    atol=1e-6)
-        # The executor pushes from the chosen point's pre-contact point.
-        pre = env.handles.executor.planner.pre_contact(seen["cloud"][choice["point"]],
-                                                       seen["normals"][choice["point"]])
+        # The executor pushes from the pre-contact point of the chosen point (lowered for a
+        # low side push, systems/low_push.py).
+        pre = env.handles.executor.planner.pre_contact(*push_contact(
+            seen["cloud"], seen["normals"], choice["point"], env.primitive_cfg))
         np.testing.assert_allclose(_status(env)["pre_contact"], pre, atol=1e-6)
         # Held while the primitive runs, though the policy would choose anew for the moved hand.
         env.step(None)
@@ -569,7 +454,7 @@ def test_the_view_draws_each_primitive_live_and_in_recordings(tmp_path):
     # The scores: each point coloured by its nearest patch centre's score, the centres being
     # the locations the policy scores, in its order.
     d = drawn[count]
-    locations = point_locations(d["cloud"], len(d["scores"]))
+    locations = nearest_locations(d["cloud"], len(d["scores"]))
     candidates = agent.choose({**obs, "cloud": d["cloud"].astype(np.float32)})["candidates"]
     np.testing.assert_array_equal(locations[candidates], np.arange(len(candidates)))
     per_point = d["scores"][locations]
@@ -605,10 +490,9 @@ def test_the_view_without_a_policy_draws_the_sent_primitive():
     np.testing.assert_allclose(places[f"{here}/arrow/head"], end, atol=1e-9)
 
 
-def test_point_locations_of_a_policy_that_scores_every_point_are_the_points():
+def test_every_cloud_point_takes_one_of_the_patch_centres_as_its_location():
     cloud = np.random.default_rng(0).normal(size=(64, 3))
-    np.testing.assert_array_equal(point_locations(cloud, 64), np.arange(64))
-    patches = point_locations(cloud, 8)
+    patches = nearest_locations(cloud, 8)
     assert patches.shape == (64,) and set(patches.tolist()) == set(range(8))
     with pytest.raises(ValueError, match="num_locations"):
-        point_locations(cloud, 65)
+        nearest_locations(cloud, 64)

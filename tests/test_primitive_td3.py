@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.nn.primitive_heads import (
     PrimitiveActor,
     PrimitiveCritic,
@@ -52,10 +53,15 @@ def _batched(states: list[dict[str, np.ndarray]]) -> dict[str, torch.Tensor]:
     return {k: torch.from_numpy(np.stack([s[k] for s in states])) for k in states[0]}
 
 
+def _settings(**changes) -> TD3Settings:
+    """A default primitive run's TD3 settings, `changes` on top."""
+    return TD3Settings.for_run(PrimitiveTrainConfig(), **changes)
+
+
 def _learner(seed: int = 0, settings: TD3Settings | None = None) -> TD3Learner:
     torch.manual_seed(seed)
     return TD3Learner(PrimitiveActor(D, K, G, hidden=64), PrimitiveCritic(D, K, G, hidden=64),
-                      settings or TD3Settings(), seed=seed)
+                      settings or _settings(), seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +95,7 @@ def test_greedy_policy_touches_the_rewarded_location_with_a_positive_push(traine
 
 
 def test_update_target_is_reward_plus_discounted_min_q_where_the_online_policy_acts():
-    settings = TD3Settings(gamma=0.9, policy_delay=1000)  # no actor step: targets stay fixed
+    settings = _settings(policy_delay=1000)  # no actor step: targets stay fixed
     learner = _learner(seed=3, settings=settings)
     batch = _filled_buffer(n=16, seed=3).sample(16, np.random.default_rng(0))
     batch["done"] = torch.tensor([0.0, 1.0] * 8)
@@ -121,7 +127,7 @@ def test_update_target_is_reward_plus_discounted_min_q_where_the_online_policy_a
 
 
 def test_actor_and_targets_move_only_every_policy_delay_updates():
-    learner = _learner(settings=TD3Settings(policy_delay=2))
+    learner = _learner(settings=_settings(policy_delay=2))
     batch = _filled_buffer(n=8).sample(8, np.random.default_rng(0))
     actor_before = copy.deepcopy(learner.actor.state_dict())
     target_before = copy.deepcopy(learner.critic_target.state_dict())
@@ -282,7 +288,7 @@ def test_heads_shapes_and_bad_input():
     with pytest.raises(ValueError, match="motions"):
         critic(features, motions[:, :2])
     with pytest.raises(ValueError, match="policy_delay"):
-        TD3Settings(policy_delay=0)
+        _settings(policy_delay=0)
 
 
 # ------------------------------------------------------------------------------- the location mask
@@ -295,7 +301,7 @@ def _masked_state(rng, usable):
 
 def test_masked_locations_are_never_chosen_and_never_bootstrapped_from():
     rng = np.random.default_rng(5)
-    learner = _learner(seed=5, settings=TD3Settings(gamma=0.9, policy_delay=1000))
+    learner = _learner(seed=5, settings=_settings(policy_delay=1000))
     usable = np.zeros(L, np.float32)
     usable[1] = 1.0  # one usable location per state
     states = [_masked_state(rng, usable) for _ in range(32)]
@@ -335,27 +341,11 @@ def test_a_state_with_no_usable_location_keeps_all_of_them():
     assert torch.isfinite(learner.scores(batch)).all()
 
 
-def test_the_actor_waits_for_its_warmup_while_the_critic_learns():
-    """actor_warmup=6 with policy_delay 2: the actor is untouched through update 6 (the critic
-    moves from the first), and steps at update 8, the first delayed step after the warm-up."""
-    learner = _learner(seed=5, settings=TD3Settings(policy_delay=2, actor_warmup=6))
-    buffer, rng = _filled_buffer(seed=5), np.random.default_rng(5)
-    actor0 = copy.deepcopy(learner.actor.state_dict())
-    critic0 = copy.deepcopy(learner.critic.state_dict())
-
-    def moved(state, before) -> bool:
-        return any(not torch.equal(state[k], before[k]) for k in before)
-
-    for _ in range(6):
-        learner.update(buffer.sample(16, rng))
-    assert not moved(learner.actor.state_dict(), actor0)
-    assert moved(learner.critic.state_dict(), critic0)
-    learner.update(buffer.sample(16, rng))  # update 7: not a delayed step
-    assert not moved(learner.actor.state_dict(), actor0)
-    learner.update(buffer.sample(16, rng))  # update 8
-    assert moved(learner.actor.state_dict(), actor0)
-
-
-def test_a_negative_actor_warmup_is_refused():
-    with pytest.raises(ValueError, match="actor_warmup"):
-        TD3Settings(actor_warmup=-1)
+def test_the_learners_numbers_are_the_run_configs():
+    """TD3Settings has no numbers of its own but the gradient clip: a run's config sets them."""
+    cfg = PrimitiveTrainConfig(gamma=0.8, batch_size=32, policy_delay=3)
+    settings = TD3Settings.for_run(cfg)
+    assert (settings.gamma, settings.batch_size, settings.policy_delay) == (0.8, 32, 3)
+    assert TD3Settings.for_run(PrimitiveTrainConfig()).gamma == PrimitiveTrainConfig().gamma
+    with pytest.raises(TypeError):
+        TD3Settings()

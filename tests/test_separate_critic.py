@@ -46,7 +46,21 @@ def test_the_value_comes_from_the_critic_head_and_the_mean_from_the_actor():
     assert actor and critic and not actor & critic
     assert id(agent.log_std) in actor
     # A shared-critic agent has no critic parameters and builds the same actor as before.
-    assert TeacherAgent("state").critic_parameters() == []
+    assert TeacherAgent("state", separate_critic=False).critic_parameters() == []
+
+
+def test_the_separate_critic_is_the_default_as_the_shipped_runs_were_trained():
+    """One source for the number: PPOConfig's default, which the agent takes too."""
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.training import TrainConfig
+    from corn_drake.package_data import data_dir
+
+    assert PPOConfig().separate_critic is True
+    assert TeacherAgent("state").critic_head is not None
+    PPO(TeacherAgent("state"), PPOConfig())  # the defaults agree
+    for name in ("push_corn", "push_state"):
+        shipped = data_dir("models") / "weights" / name / "config.yaml"
+        assert load_config(TrainConfig, shipped).ppo.separate_critic is True
 
 
 def test_the_critic_trains_every_minibatch_after_the_policy_stops_early():
@@ -62,8 +76,9 @@ def test_the_critic_trains_every_minibatch_after_the_policy_stops_early():
     assert ppo.losses(obs, actions, logp, adv, ret)["value"].item() < before
     # With a shared critic the same update ends at the stop: no critic steps of its own.
     torch.manual_seed(0)
-    shared = TeacherAgent("state")
-    stats = PPO(shared, PPOConfig(epochs=6, minibatches=2, lr=1e-2, kl_target=1e-7)).update(
+    shared = TeacherAgent("state", separate_critic=False)
+    stats = PPO(shared, PPOConfig(epochs=6, minibatches=2, lr=1e-2, kl_target=1e-7,
+                                  separate_critic=False)).update(
         *_batch(shared), torch.Generator().manual_seed(1))
     assert stats["early_stop"] == 1.0 and stats["critic_steps"] == 0
 
@@ -84,14 +99,15 @@ def test_critic_steps_never_move_the_policy():
 
 def test_mismatched_settings_are_refused():
     with pytest.raises(ValueError, match="separate_critic"):
-        PPO(TeacherAgent("state"), PPOConfig(separate_critic=True))
+        PPO(TeacherAgent("state", separate_critic=False), PPOConfig(separate_critic=True))
     with pytest.raises(ValueError, match="separate_critic is off"):
-        PPO(TeacherAgent("state", separate_critic=True), PPOConfig())
+        PPO(TeacherAgent("state", separate_critic=True), PPOConfig(separate_critic=False))
     with pytest.raises(ValueError, match="critic_lr"):
         PPO(TeacherAgent("state", separate_critic=True),
             PPOConfig(separate_critic=True, critic_lr=0.0))
     # A saved PPO state from the other setting does not load silently.
-    shared_state = PPO(TeacherAgent("state"), PPOConfig()).state_dict()
+    shared_state = PPO(TeacherAgent("state", separate_critic=False),
+                       PPOConfig(separate_critic=False)).state_dict()
     separate = PPO(TeacherAgent("state", separate_critic=True), PPOConfig(separate_critic=True))
     with pytest.raises(ValueError, match="disagree"):
         separate.load_state_dict(shared_state)

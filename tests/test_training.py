@@ -314,7 +314,7 @@ def test_a_run_started_from_another_carries_its_agent_and_refuses_another_networ
     turn = tmp_path / "turn"
     assert main(["train", "--init-from", str(source), "--task", "push_turn", "--steps", "32",
                  "--envs-per-worker", "2", "--rollout-steps", "16", "--set",
-                 "ppo.lr=1e-12", "--set", "ppo.critic_lr=1e-12", "--out", str(turn),
+                 "ppo.lr=1e-12", "--set", "ppo.lr_min=1e-12", "--set", "ppo.critic_lr=1e-12", "--out", str(turn),
                  "--no-progress"]) == 0
     cfg, carried = load_run(turn)
     assert cfg.init_from == str(source) and cfg.env.task.name == "push_turn"
@@ -322,7 +322,7 @@ def test_a_run_started_from_another_carries_its_agent_and_refuses_another_networ
         # The observation normalisers moved with the new run's batch; the weights barely did.
         if "normalizer" not in name:
             torch.testing.assert_close(a, b, atol=1e-6, rtol=0, msg=name)
-    for extra, named in ((["--set", "ppo.separate_critic=true"], "its ppo.separate_critic"),
+    for extra, named in ((["--set", "ppo.separate_critic=false"], "its ppo.separate_critic"),
                          (["--policy", "e2e"], "its policy is 'state'")):
         assert main(["train", "--init-from", str(source), *extra, "--out",
                      str(tmp_path / "other"), "--no-progress"]) != 0

@@ -7,17 +7,16 @@ recorded value, and a flag given on a resume is an override checked against the 
 
 from __future__ import annotations
 
-from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int, seed_int
 
 # argparse dest -> the RunSettings field it sets.
 RUN_SHORTCUTS = {"steps": "total_steps", "workers": "workers", "envs_per_worker": "envs_per_worker",
                  "seed": "seed", "encoder": "encoder", "allow_weak_encoder": "allow_weak_encoder",
-                 "ray_address": "ray_address", "device": "device", "pin_workers": "pin_workers"}
+                 "ray_address": "ray_address", "device": "device"}
 # On a resume total_steps may grow (the run is extended); where the workers and the learner's
-# tensors live, which cores the workers run on, and how often the run checkpoints, do not change
-# what it learns.
+# tensors live, and how often the run checkpoints, do not change what it learns.
 RESUME_MAY_GROW = ("total_steps",)
-RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every", "pin_workers")
+RESUME_MAY_CHANGE = ("ray_address", "device", "checkpoint_every")
 
 
 def add_run_arguments(parser, command: str, encoder_help: str) -> None:
@@ -39,14 +38,11 @@ def add_run_arguments(parser, command: str, encoder_help: str) -> None:
     parser.add_argument("--envs-per-worker", type=positive_int, default=None,
                         help="envs each rollout worker steps (in this process with --workers 0) "
                              "(default: 4)")
-    parser.add_argument("--seed", type=nonnegative_int, default=None,
+    parser.add_argument("--seed", type=seed_int, default=None,
                         help="seed of the networks' initialisation and the envs' episodes "
                              "(default: 0)")
     parser.add_argument("--ray-address", default=None,
                         help="connect to a Ray cluster (default: a local one, started with --workers)")
-    parser.add_argument("--pin-workers", action="store_true", default=None,
-                        help="run Ray worker w on core w + 1 alone (Linux; for many-core "
-                             "machines, see docs/many_core.md)")
     parser.add_argument("--device", default=None,
                         help="torch device of the learner (its batched inference and updates): "
                              "cpu (default), cuda or cuda:N; the envs run on the CPU")

@@ -13,7 +13,7 @@ from corn_drake.nn.threads import SMALL_MACHINE_CPUS, auto_torch_threads
 # One default for every command. "auto" is torch's own count on a machine with more than
 # SMALL_MACHINE_CPUS CPUs, and 1 thread on a small one, where it costs a quiet `corn` training
 # run up to 12 % but saves it from running 4.5x slower when another busy process shares the
-# core (nn/threads.py, docs/results/README.md); evaluation runs level with 1 or 2 threads.
+# core (nn/threads.py, the results page); evaluation runs level with 1 or 2 threads.
 DEFAULT = "auto"
 
 

@@ -29,6 +29,10 @@ positive_int = _checked(int, lambda v: v >= 1, "an integer >= 1")
 nonnegative_int = _checked(int, lambda v: v >= 0, "an integer >= 0")
 positive_float = _checked(float, lambda v: v > 0, "a number > 0")
 finite_float = _checked(float, lambda v: True, "a finite number")
+# A seed: numpy's legacy seeding, torch's and Ray's take 32-bit seeds; a larger one (or 1e23, not
+# an integer) used to end a run with a traceback after its config.yaml was written. The same
+# range as the configs' "seed" rule (config/bounds.SEED_LIMIT, 2**32).
+seed_int = _checked(int, lambda v: 0 <= v < 2 ** 32, "an integer in [0, 2**32)")
 
 
 def positive_int_list(text: str) -> list[int]:

@@ -20,12 +20,12 @@ import hashlib
 import json
 from pathlib import Path
 
-from corn_drake.assets.manifest import LibraryObject, manifest_path, read_manifest
+from corn_drake.assets.manifest import (FILE_FIELDS, LibraryObject, library_file,
+                                        manifest_path, read_manifest)
 from corn_drake.errors import InputError, MissingInputError
 
 IDENTITY_FIELDS = ("id", "family", "source", "split", "unseen_group", "thin")
 FLOAT_FIELDS = ("mass", "radius")
-FILE_FIELDS = ("hulls", "visual", "cloud", "stable_poses", "bbox_corners", "unit_inertia")
 
 
 def object_hash(library: str | Path, obj: LibraryObject) -> str:
@@ -41,7 +41,7 @@ def object_hash(library: str | Path, obj: LibraryObject) -> str:
         for rel in [value] if isinstance(value, str) else value or []:
             if not rel:  # a hand-written library may name no file ("")
                 continue
-            path = library / rel
+            path = library_file(library, obj, field, rel)
             try:
                 data = path.read_bytes()
             except FileNotFoundError:

@@ -22,8 +22,8 @@ import numpy as np
 from corn_drake.assets.build_pool import in_plan_order
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
 from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
-from corn_drake.assets.manifest import (LibraryObject, Manifest, Rejection, manifest_path,
-                                        read_manifest, write_manifest)
+from corn_drake.assets.manifest import (LibraryObject, Manifest, Rejection, library_file,
+                                        manifest_path, read_manifest, write_manifest)
 from corn_drake.assets.process import ProcessConfig, process_object
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.assets.splits import INGESTED_FAMILY, MEMBER_FRACTION, assign_splits
@@ -59,8 +59,9 @@ def load_object_spec(library: str | Path, object_id: str) -> ObjectSpec:
                       cloud=array("cloud"),
                       stable_poses=array("stable_poses"), radius=float(obj.radius),
                       bbox_corners=array("bbox_corners"),
-                      hull_paths=[library / h for h in obj.hulls],
-                      visual_path=library / obj.visual, thin=bool(obj.thin))
+                      hull_paths=[library_file(library, obj, "hulls", h) for h in obj.hulls],
+                      visual_path=library_file(library, obj, "visual", obj.visual),
+                      thin=bool(obj.thin))
     _check_spec(spec, f"object {object_id!r} of {manifest_path(library)}")
     return spec
 
@@ -86,10 +87,51 @@ def _check_spec(spec: ObjectSpec, where: str) -> None:
     for path in [*spec.hull_paths, spec.visual_path]:
         if not Path(path).is_file() or Path(path).stat().st_size == 0:
             raise MissingInputError(f"{where}: mesh file missing or empty: {path}")
+        # Drake makes a convex hull of each (the visual mesh too: scene/builder.py) deep in
+        # building the plant, and a file it cannot use ends there in a long traceback naming
+        # neither the object nor the library.
+        problem = convex_mesh_problem(Path(path))
+        if problem:
+            raise InputError(f"{where}: mesh file {path} {problem}")
+
+
+def convex_mesh_problem(path: Path) -> str | None:
+    """Why Drake cannot make a solid convex hull of the OBJ file `path` (not OBJ text, fewer
+    than 4 vertices, a vertex that is not three finite numbers, all vertices in one plane),
+    or None. Reads the vertex lines as Drake's OBJ reader does; faces do not matter to a hull."""
+    if path.suffix.lower() != ".obj":
+        return "is not an .obj file (a library's meshes are OBJ text)"
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        return "is not OBJ text (binary bytes)"
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    vertices = []
+    for number, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0] != "v":
+            continue
+        try:
+            xyz = [float(v) for v in parts[1:4]]
+        except ValueError:
+            xyz = []
+        if len(xyz) != 3 or not np.all(np.isfinite(xyz)):
+            return f"line {number}: vertex {line.strip()[:60]!r} is not three finite numbers"
+        vertices.append(xyz)
+    if len(vertices) < 4:
+        return (f"has {len(vertices)} vertices: a convex hull needs at least 4 not in one plane"
+                + (" (is it an OBJ file?)" if not vertices else ""))
+    points = np.asarray(vertices) - np.mean(vertices, axis=0)
+    singular = np.linalg.svd(points, compute_uv=False)
+    # Exactly flat (or a line, a point) up to rounding: no volume, no contact surface.
+    if singular[-1] <= 1e-9 * max(singular[0], 1e-300):
+        return f"has all {len(vertices)} vertices in one plane: its convex hull has no volume"
+    return None
 
 
 def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:
-    path = library / getattr(obj, key)
+    path = library_file(library, obj, key, getattr(obj, key))
     try:
         return np.load(path, allow_pickle=False)
     except FileNotFoundError:
@@ -289,6 +331,53 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
     return manifest
 
 
+# How a file name becomes an id, said in the refusal of two files that meet on one.
+ID_RULE = "an id keeps the letters and digits of the path, makes other characters '_', and " \
+          "ignores case"
+
+
+def ingested_id(rel: str) -> str:
+    """The object id of the mesh file `rel` (relative to the source folder): "mesh_" and its
+    path without the extension, every character but letters and digits made "_". Also the name
+    of the object's folder in the library."""
+    name = Path(rel).with_suffix("").as_posix()
+    return "mesh_" + "".join(c if c.isalnum() else "_" for c in name)
+
+
+def ingested_ids(source: Path, files: list[Path], manifest: Manifest, out: Path) -> dict[str, str]:
+    """{file relative to `source`: its object id} for the mesh files (supported extensions) of
+    `files`; an InputError naming both files when two of them, or one of them and an object the
+    library in `out` already holds from another file, would get the same id.
+
+    Ids are file names made safe, so distinct files can meet on one: "cup a.obj" and
+    "cup_a.obj", "cup.obj" and "cup.stl", "sub/cup.obj" and "sub_cup.obj". They are compared
+    case-insensitively too: the id is also the object's folder, and "mesh_Cup" and "mesh_cup"
+    are one folder on macOS's and Windows' file systems (a library built on Linux is copied
+    there). Either object would overwrite the other's files. The build is refused rather than
+    one id changed (a suffix, a hash): an id names the object in every report and card, so it
+    should be the name the user gave, the same whichever files sit beside it and whatever order
+    a resumed library was built in; renaming one file is a one-line fix the user controls."""
+    # casefolded id -> (the file that has it, whether the library already holds its object)
+    owners: dict[str, tuple[str, bool]] = {o.id.casefold(): (o.source, True)
+                                           for o in manifest.objects}
+    ids = {}
+    for path in files:
+        if path.suffix.lower() not in SUPPORTED:  # rejected with its reason, gets no id
+            continue
+        rel = str(path.relative_to(source))
+        object_id = ids[rel] = ingested_id(rel)
+        owner, built = owners.setdefault(object_id.casefold(), (rel, False))
+        if owner == rel:  # this file, or its object built by an earlier run (a resume)
+            continue
+        if built:
+            raise InputError(f"mesh folder {source}: {rel!r} would be object {object_id!r}, "
+                             f"which library {out} already holds from {owner!r} ({ID_RULE}); "
+                             "rename it")
+        raise InputError(f"mesh folder {source}: {owner!r} and {rel!r} would both be object "
+                         f"{object_id!r} ({ID_RULE}); rename one of them")
+    return ids
+
+
 def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
                   cfg: ProcessConfig | None = None, progress: bool = True) -> Manifest:
     from tqdm import tqdm
@@ -296,14 +385,17 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
     if not source.is_dir():
         raise MissingInputError(f"mesh folder not found: {source}")
-    if not any(p.suffix.lower() in SUPPORTED for p in find_mesh_files(source)):
+    files = find_mesh_files(source)
+    if not any(p.suffix.lower() in SUPPORTED for p in files):
         # Refuse before making `out`: an empty library would only fail later, elsewhere.
         raise InputError(f"mesh folder {source}: no mesh files "
                          f"({', '.join(sorted(SUPPORTED))}) in it")
+    manifest = _load_or_new(out)
+    ids = ingested_ids(source, files, manifest, out)  # before anything is written
     out.mkdir(parents=True, exist_ok=True)
-    manifest, timings = _load_or_new(out), _load_timings(out)
+    timings = _load_timings(out)
     done = {o.source for o in manifest.objects} | {r.source for r in manifest.rejected}
-    for path in tqdm(find_mesh_files(source), disable=not progress, desc="ingest"):
+    for path in tqdm(files, disable=not progress, desc="ingest"):
         rel = str(path.relative_to(source))
         if rel in done:
             continue
@@ -315,7 +407,7 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
             manifest.rejected.append(Rejection(rel, str(e)))
             _save(out, manifest, seed, timings=timings)
             continue
-        object_id = "mesh_" + "".join(c if c.isalnum() else "_" for c in Path(rel).with_suffix("").as_posix())
+        object_id = ids[rel]
         entry = LibraryObject(id=object_id, source=rel, family=INGESTED_FAMILY, warnings=warnings)
         convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
         try:

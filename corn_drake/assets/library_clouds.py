@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from corn_drake.assets.manifest import read_manifest
+from corn_drake.assets.manifest import library_file, read_manifest
 from corn_drake.contract import DEFAULT_NUM_POINTS, POSITION_DIM
 from corn_drake.errors import InputError
 
@@ -26,7 +26,7 @@ def load_object_clouds(library: str | Path) -> list[ObjectCloud]:
     clouds = []
     for obj in read_manifest(library).objects:
         obj.require(library, ("cloud", "radius"))
-        path = library / obj.cloud
+        path = library_file(library, obj, "cloud", obj.cloud)
         try:
             cloud = np.load(path)
         except (OSError, ValueError) as e:

@@ -1,12 +1,14 @@
 """An object library's manifest.json: its typed schema, the one reader and the one writer.
 
 LIBRARY/manifest.json holds {"objects": [LibraryObject...], "rejected": [Rejection...],
-"split_rule": {...}}; every path in it is relative to LIBRARY. It records what was built, never
-how long it took (LIBRARY/build_timings.json does), so it is the same byte for byte whenever the
-same objects are built (a library written before keeps its "timings" as fields the schema does
-not name). Every command that takes --objects reads it through read_manifest, so a missing or
-corrupt library is reported the same way (an InputError naming the file and, for a bad entry,
-the object and the field), and the library builder writes it through write_manifest.
+"split_rule": {...}}; every path in it is relative to LIBRARY and must stay inside it
+(read_manifest refuses ".." and absolute paths, library_file symbolic links that point out). It
+records what was built, never how long it took (LIBRARY/build_timings.json does), so it is the
+same byte for byte whenever the same objects are built (a library written before keeps its
+"timings" as fields the schema does not name). Every command that takes --objects reads it
+through read_manifest, so a missing or corrupt library is reported the same way (an InputError
+naming the file and, for a bad entry, the object and the field), and the library builder writes
+it through write_manifest.
 
 Kept apart from assets/library.py so readers (contact data, Ray workers) need not import the
 mesh-processing stack the library builder uses.
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 import types
 import typing
 from pathlib import Path
@@ -26,6 +29,8 @@ from corn_drake.storage.atomic_files import read_json, write_json
 
 WHAT = "object library manifest"
 SPLITS = ("train", "unseen")
+# The fields of LibraryObject that name files of the library (relative paths).
+FILE_FIELDS = ("hulls", "visual", "cloud", "stable_poses", "bbox_corners", "unit_inertia")
 
 
 @dataclasses.dataclass
@@ -98,6 +103,50 @@ class Manifest:
 
 def manifest_path(library: str | Path) -> Path:
     return Path(library) / "manifest.json"
+
+
+# --- paths and ids that stay inside the library ------------------------------------------------
+# A manifest is input: copied from elsewhere, hand-edited, or crafted. A file path in it that is
+# absolute or climbs out with "..", or an id that is used as a file name (a gallery's ID.png,
+# an evaluation's episode_K_ID.html) and holds a separator, would make readers open, hash or
+# hand to Drake files outside the library, and writers write beside the output folder.
+def _path_problem(rel: str) -> str | None:
+    """Why the manifest path `rel` cannot name a file inside the library (lexically), or None."""
+    if "\0" in rel:
+        return "holds a NUL character"
+    if os.path.isabs(rel):
+        return "is absolute"
+    # (normpath only when there is a ".." to climb with: a manifest names hundreds of files)
+    if ".." in rel and os.path.normpath(rel).split(os.sep)[0] == "..":
+        return "leads outside the library"
+    return None
+
+
+def _id_problem(object_id: str) -> str | None:
+    if object_id in (".", "..") or any(c in object_id for c in "/\\\0"):
+        return "must be a plain name (no '/', '\\', NUL, '.' or '..'): it names files"
+    return None
+
+
+def library_file(library: str | Path, obj: LibraryObject, field: str, rel: str) -> Path:
+    """LIBRARY/rel, the file `obj`'s `field` names, after checking that it resolves inside the
+    library: read_manifest refused absolute and ".." paths already, and this also follows
+    symbolic links (a link inside the library pointing out of it is refused the same way).
+    An InputError names the manifest, the object and the path otherwise."""
+    library = Path(library)
+    path = library / rel
+    problem = _path_problem(rel)
+    if problem is None:
+        try:
+            inside = path.resolve().is_relative_to(library.resolve())
+        except (OSError, RuntimeError) as e:  # a symlink loop, an unreadable folder
+            raise InputError(f"{WHAT} {manifest_path(library)}: object {obj.id!r} {field} "
+                             f"path {rel!r} cannot be resolved ({e})") from None
+        problem = None if inside else "resolves (through a symbolic link) outside the library"
+    if problem:
+        raise InputError(f"{WHAT} {manifest_path(library)}: object {obj.id!r} {field} path "
+                         f"{rel!r} {problem}")
+    return path
 
 
 # --- typed (de)serialisation ----------------------------------------------------------------
@@ -189,6 +238,7 @@ def read_manifest(library: str | Path) -> Manifest:
         if not isinstance(entry, dict) or not isinstance(entry.get("id"), str) or not entry["id"]:
             raise InputError(f"{WHAT} {path}: {where} has no 'id' string")
         obj = _from_json(LibraryObject, entry, f"{where} ({entry['id']!r})", path)
+        _check_names(obj, path)
         if obj.split not in SPLITS:
             raise InputError(f"{WHAT} {path}: {where} ({obj.id!r}) has split {obj.split!r}, "
                              f"expected one of {SPLITS}")
@@ -203,6 +253,22 @@ def read_manifest(library: str | Path) -> Manifest:
     rest = _from_json(Manifest, {k: v for k, v in data.items() if k not in ("objects", "rejected")},
                       "the manifest", path)
     return dataclasses.replace(rest, objects=objects, rejected=rejected)
+
+
+def _check_names(obj: LibraryObject, path: Path) -> None:
+    """An InputError naming the manifest, the object and the value, for an id that is not a
+    plain name or a file path that leaves the library on its face (library_file also follows
+    symbolic links, when a reader opens the file)."""
+    problem = _id_problem(obj.id)
+    if problem:
+        raise InputError(f"{WHAT} {path}: object id {obj.id!r} {problem}")
+    for field in FILE_FIELDS:
+        value = getattr(obj, field)
+        for rel in [value] if isinstance(value, str) else value or []:
+            problem = _path_problem(rel) if rel else None  # "": no file (hand-written libraries)
+            if problem:
+                raise InputError(f"{WHAT} {path}: object {obj.id!r} {field} path {rel!r} "
+                                 f"{problem}")
 
 
 def write_manifest(library: str | Path, manifest: Manifest) -> None:

@@ -24,7 +24,7 @@ cannot cross in practice. Poses are stored in the faces' order. A small change i
 changes a stored pose only if it moves a drop's rest to another cluster (clusters are at least
 0.1 rad apart; a rest is mostly within 0.03 rad of its face) or makes a drop reach a cluster no
 other drop reaches: tests/test_objects_stable_poses.py checks that it does not on a stool, and
-docs/results/README.md ("Stable poses that do not depend on the machine") on the unseen build.
+the results page ("Stable poses that do not depend on the machine") on the unseen build.
 
 A pose is kept only if, placed exactly as stored, it holds for 1 s under two contact settings:
 the training one (rigid hulls on a compliant table, 12.5 ms steps) and a finer one (compliant

@@ -1,7 +1,7 @@
 """`corn-drake bench cores`: what the machine itself allows N rollout workers, with no Ray and
 no learner: the ceiling of `bench scale`'s efficiency.
 
-For each process count N (and each pinning mode) N plain processes (multiprocessing, spawn)
+For each process count N, N plain processes (multiprocessing, spawn)
 each do exactly a Ray segment worker's job: build `--envs-per-worker` teacher envs (worker i's
 envs, as the trainer numbers them) and a CPU copy of a randomly initialised policy with one
 torch thread, then collect `--segments` PPO segments of `--rollout-steps` steps. Every
@@ -10,7 +10,7 @@ update. Per count the report gives:
 
   pace_mean / pace_slowest   env steps/s of a process while it collects (inference included),
                              the mean over processes and segments, and the slowest process's;
-  pace_ratio                 pace_mean / pace_mean of 1 process (same run, same pinning): what
+  pace_ratio                 pace_mean / pace_mean of 1 process (same run): what
                              the other busy cores cost each one (shared caches, memory bandwidth,
                              clocks, sibling hyper-threads);
   lockstep_efficiency        per segment, (N x envs x steps / the slowest process's seconds) /
@@ -18,9 +18,10 @@ update. Per count the report gives:
                              learner that cost nothing would get. bench scale's efficiency can
                              not be higher on this machine.
 
-`--pin both` (default) measures every count unpinned and pinned (process i on core i + 1 of the
-usable cores, rl/workers/core_pinning.py), in that order, in the same run. The report's `machine` block
-says how many physical cores the usable CPUs are.
+The processes are left where the kernel puts them (pinning each to a core was measured here and
+retired: no difference that survived a rerun, docs/many_core.md); the report keeps its
+`modes.unpinned` block so it reads as the earlier reports did. The report's `machine` block says
+how many physical cores the usable CPUs are.
 """
 
 from __future__ import annotations
@@ -33,9 +34,7 @@ from corn_drake.rl.policy_kinds import POLICY_KINDS
 
 NAME = "cores"
 HELP = ("the machine's own ceiling for N rollout workers (no Ray, no learner): each process's "
-        "collection pace and the lock-step efficiency, unpinned and pinned to cores")
-
-PIN_MODES = {"off": (False,), "on": (True,), "both": (False, True)}
+        "collection pace and the lock-step efficiency")
 
 
 def add_arguments(parser):
@@ -51,9 +50,6 @@ def add_arguments(parser):
                              "the simulators)")
     parser.add_argument("--rollout-steps", type=positive_int, default=32,
                         help="steps per env and segment")
-    parser.add_argument("--pin", choices=sorted(PIN_MODES), default="both",
-                        help="pin process i to core i + 1 of the usable cores: off, on, or both "
-                             "(each count measured unpinned, then pinned)")
     parser.add_argument("--policy", default="corn", choices=POLICY_KINDS,
                         help="policy run (randomly initialised: timing only)")
     parser.add_argument("--task", default="push",
@@ -74,9 +70,9 @@ class Job:
     segments: int
 
 
-def collect_paces(job: Job, index: int, count: int, pin: bool, barrier, results) -> None:
+def collect_paces(job: Job, index: int, count: int, barrier, results) -> None:
     """Process body: worker `index` of `count` collects `job`'s segments and puts
-    (index, core, [seconds per timed segment]) on `results`; ('error', index, text) on failure,
+    (index, [seconds per timed segment]) on `results`; ('error', index, text) on failure,
     so the parent reports it instead of waiting forever."""
     try:
         import time
@@ -86,13 +82,12 @@ def collect_paces(job: Job, index: int, count: int, pin: bool, barrier, results)
 
         from corn_drake.config.diagram_files import load_teacher_config
         from corn_drake.rl.ppo.agent import TeacherAgent
-        from corn_drake.rl.workers.core_pinning import take_worker_core
         from corn_drake.rl.pretrained_encoders import make_encoder
         from corn_drake.rl.run_progress import run_env_factory
         from corn_drake.rl.ppo.segments import SegmentCollector
         from corn_drake.rl.envs.vec_env import EnvBatch
 
-        core = take_worker_core(index if pin else None)  # as a segment worker takes it
+        torch.set_num_threads(1)  # as a segment worker runs
         torch.manual_seed(job.seed)
         env_cfg = load_teacher_config(job.task)
         factory = run_env_factory(env_cfg, job.seed, count, job.envs)
@@ -108,19 +103,19 @@ def collect_paces(job: Job, index: int, count: int, pin: bool, barrier, results)
             started = time.perf_counter()
             collector.collect(rng.standard_normal(shape).astype(np.float32))
             seconds.append(time.perf_counter() - started)
-        results.put((index, core, seconds))
+        results.put((index, seconds))
     except BaseException as exc:  # noqa: BLE001 - reported by the parent, which then fails
         barrier.abort()
         results.put(("error", index, f"{type(exc).__name__}: {exc}"))
 
 
-def measure(job: Job, count: int, pin: bool) -> dict:
+def measure(job: Job, count: int) -> dict:
     """`count` processes collecting `job` at once: each one's seconds per timed segment."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")  # no forked copy of a parent's Drake or torch
     barrier, results = ctx.Barrier(count), ctx.Queue()
-    procs = [ctx.Process(target=collect_paces, args=(job, i, count, pin, barrier, results),
+    procs = [ctx.Process(target=collect_paces, args=(job, i, count, barrier, results),
                          daemon=True) for i in range(count)]
     for p in procs:
         p.start()
@@ -136,8 +131,7 @@ def measure(job: Job, count: int, pin: bool) -> dict:
         raise RuntimeError(f"bench cores: process {errors[0][1]} of {count} failed: "
                            f"{errors[0][2]}")
     rows.sort()
-    return {"procs": count, "pinned": pin, "cores": [r[1] for r in rows],
-            "seconds": [r[2] for r in rows]}
+    return {"procs": count, "seconds": [r[1] for r in rows]}
 
 
 def _gather(results, procs) -> list:
@@ -186,25 +180,22 @@ def run(args) -> dict:
               args.warmup_segments, args.segments)
     counts = sorted(set(args.procs) | {1})
     steps = args.envs_per_worker * args.rollout_steps
-    modes = {}
-    for pin in PIN_MODES[args.pin]:
-        runs, baseline = [], None
-        for count in counts:
-            summary = summarise(measure(job, count, pin), steps, baseline)
-            baseline = summary["pace_mean"] if baseline is None else baseline
-            runs.append(summary)
-            print(f"  {'pinned' if pin else 'unpinned'}, {count} processes: pace "
-                  f"{summary['pace_mean']:.0f} env steps/s (slowest "
-                  f"{summary['pace_slowest']:.0f}), ratio {summary['pace_ratio']:.2f}, "
-                  f"lock-step efficiency {summary['lockstep_efficiency']:.2f}", flush=True)
-        modes["pinned" if pin else "unpinned"] = {
-            "procs": counts,
-            "pace_ratio": [r["pace_ratio"] for r in runs],
-            "lockstep_efficiency": [r["lockstep_efficiency"] for r in runs],
-            "pace_mean": [r["pace_mean"] for r in runs],
-            "pace_slowest": [r["pace_slowest"] for r in runs],
-            "runs": runs,
-        }
+    runs, baseline = [], None
+    for count in counts:
+        summary = summarise(measure(job, count), steps, baseline)
+        baseline = summary["pace_mean"] if baseline is None else baseline
+        runs.append(summary)
+        print(f"  {count} processes: pace {summary['pace_mean']:.0f} env steps/s (slowest "
+              f"{summary['pace_slowest']:.0f}), ratio {summary['pace_ratio']:.2f}, "
+              f"lock-step efficiency {summary['lockstep_efficiency']:.2f}", flush=True)
+    modes = {"unpinned": {
+        "procs": counts,
+        "pace_ratio": [r["pace_ratio"] for r in runs],
+        "lockstep_efficiency": [r["lockstep_efficiency"] for r in runs],
+        "pace_mean": [r["pace_mean"] for r in runs],
+        "pace_slowest": [r["pace_slowest"] for r in runs],
+        "runs": runs,
+    }}
     cpus = usable_cpus()
     return {"procs": counts, "modes": modes, "policy": args.policy, "task": args.task,
             "envs_per_worker": args.envs_per_worker, "rollout_steps": args.rollout_steps,

@@ -57,7 +57,7 @@ def add_arguments(parser):
                         help="seed of the networks and the envs' episodes")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="a PPO setting of the runs being timed, e.g. --set "
-                             "ppo.separate_critic=true (repeatable; ppo.* only: the update's "
+                             "ppo.separate_critic=false (repeatable; ppo.* only: the update's "
                              "cost depends on them, the envs' does not; default: none)")
     add_torch_threads_argument(parser, "every policy, as `train` takes it")
 

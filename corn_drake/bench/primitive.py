@@ -51,12 +51,6 @@ def add_arguments(parser):
                              "updates)")
     parser.add_argument("--batch-size", type=positive_int, default=None,
                         help="TD3 batch (default: the training default, PrimitiveTrainConfig)")
-    parser.add_argument("--locations", choices=("patch", "point"), default="patch",
-                        help="the policy's candidate contact locations, as `train --set "
-                             "locations=...`")
-    parser.add_argument("--point-locations", type=positive_int, default=64,
-                        help="how many cloud points a 'point' policy scores, as `train --set "
-                             "point_locations=...` (default 64)")
     parser.add_argument("--encoder", default="",
                         help="a CORN encoder file for both policies (default: randomly "
                              "initialised ones; the pace is the same)")
@@ -170,12 +164,10 @@ def run(args) -> dict:
     from corn_drake.rl.envs.teacher_env import TeacherEnv
     from corn_drake.rl.primitive.agent import agent_for
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-    from corn_drake.rl.primitive.trainer import td3_settings
     from corn_drake.rl.primitive.replay import ReplayBuffer
-    from corn_drake.rl.primitive.td3 import TD3Learner
+    from corn_drake.rl.primitive.td3 import TD3Learner, TD3Settings
 
-    cfg = PrimitiveTrainConfig(env=load_primitive_env_config(args.task), locations=args.locations,
-                               point_locations=args.point_locations, seed=args.seed)
+    cfg = PrimitiveTrainConfig(env=load_primitive_env_config(args.task), seed=args.seed)
     if args.batch_size is not None:
         cfg.batch_size = args.batch_size
     cfg.check()
@@ -193,7 +185,7 @@ def run(args) -> dict:
             raise RuntimeError("every primitive ended in a simulation error: no transition to "
                                "train TD3 on")
         print(f"primitive: {args.decisions / decisions['seconds']:.2f} decisions/s")
-        learner = TD3Learner(agent.actor, agent.critic, td3_settings(cfg), seed=args.seed)
+        learner = TD3Learner(agent.actor, agent.critic, TD3Settings.for_run(cfg), seed=args.seed)
         updates = time_updates(learner, replay, cfg.batch_size, args.updates, args.warmup,
                                args.seed)
         print(f"TD3: {args.updates / updates['seconds']:.1f} updates/s "
@@ -222,8 +214,6 @@ def run(args) -> dict:
         "forward_primitive_to_dense": forward_ms / dense_forward_ms,
         "reference": "dense corn teacher: TeacherEnv + TeacherAgent mean actions, one env",
         "task": cfg.env.task.name, "object": env.scene.object_spec.name,
-        "locations": cfg.locations,
-        "point_locations": cfg.point_locations if cfg.locations == "point" else None,
         "encoder": args.encoder or "random",
         "decisions": args.decisions, "dense_steps": args.dense_steps, "updates": args.updates,
         "warmup": args.warmup, "batch_size": cfg.batch_size, "replay_transitions": len(replay),

@@ -29,7 +29,7 @@ policy's forward passes take. rollout_wait_s_per_update against slowest_collecti
 splits the learner's wait into the slowest worker's own collection and the rest (dispatch,
 transfer, unpacking).
 
-Each run starts its own local Ray and shuts it down after (rl/ray_workers.init_ray ends what
+Each run starts its own local Ray and shuts it down after (rl/workers/ray_workers.init_ray ends what
 Ray leaves behind), unless Ray was already running in this process: then that one is used.
 """
 
@@ -69,9 +69,6 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu",
                         help="torch device of the learner (agent, batched inference, PPO "
                              "update): cpu, cuda or cuda:N; the envs run on the CPU")
-    parser.add_argument("--pin-workers", action="store_true",
-                        help="run worker w on core w + 1 alone (rl/workers/core_pinning.py), as "
-                             "`train --pin-workers`")
 
 
 def instrument_rollouts(trainer, timer, segments: list) -> None:
@@ -132,8 +129,7 @@ def measure(args, env_cfg, workers: int) -> dict:
     from corn_drake.bench.timed_training import (check_counts, run_trainer, train_config,
                                                  trainer_logged_steps_per_s)
 
-    cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device,
-                       args.pin_workers)
+    cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device)
     timer, segments = PhaseTimer(), []
     with _RaySession():
         trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
@@ -247,7 +243,6 @@ def run(args) -> dict:
         "rollout_steps": args.rollout_steps,
         "device": str(device),
         "device_name": device_name(device),
-        "pinned_workers": args.pin_workers,
         "usable_cpus": cpus,
         "torch_threads": threads_used,
         "torch_interop_threads": torch.get_num_interop_threads(),

@@ -40,8 +40,7 @@ def add_trainer_arguments(parser) -> None:
                                        "count used")
 
 
-def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str = "cpu",
-                 pin_workers: bool = False):
+def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str = "cpu"):
     """The TrainConfig of a benchmark run: warm-up plus timed updates of `args`, on `env_cfg`."""
     from corn_drake.config.training import TrainConfig
 
@@ -49,7 +48,7 @@ def train_config(args, env_cfg, workers: int, envs_per_worker: int, device: str 
     return TrainConfig(policy=args.policy, workers=workers, envs_per_worker=envs_per_worker,
                        total_steps=per_update * (args.warmup_updates + args.updates),
                        rollout_steps=args.rollout_steps, seed=args.seed, device=device,
-                       pin_workers=pin_workers, env=env_cfg)
+                       env=env_cfg)
 
 
 def time_updates(trainer, timer, warmup_updates: int = 0) -> None:

@@ -44,7 +44,7 @@ def build_primitive_diagram(cfg: TeacherDiagramConfig, primitive: PrimitiveConfi
     scene, clock = teacher.scene, clock_of(cfg.scene.physics)
     num_points = cfg.scene.object.cloud_points
     executor = builder.AddNamedSystem("executor", PrimitiveExecutor(
-        primitive, cfg.controller, clock, num_points, cfg.scene.table_size))
+        primitive, cfg.controller, clock, num_points))
     builder.Connect(teacher.observations.GetOutputPort("observation"),
                     executor.GetInputPort("observation"))
     builder.Connect(executor.GetOutputPort("action"), teacher.ik.GetInputPort("action"))

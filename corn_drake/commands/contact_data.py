@@ -7,7 +7,7 @@ OUT/arguments.json; any difference is refused, naming the argument.
 
 from __future__ import annotations
 
-from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import positive_int, seed_int
 
 NAME = "contact-data"
 HELP = "generate gripper-contact samples from an object library (sharded, resumable)"
@@ -20,7 +20,7 @@ def add_arguments(parser):
                         help="samples for each of val / unseen (default: num-samples / 10)")
     parser.add_argument("--shard-size", type=positive_int, default=4096,
                         help="samples per shard file (a killed run resumes at a shard)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0,
+    parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of the samples (each shard's from it, its split and index)")
     parser.add_argument("--out", required=True, help="dataset folder, e.g. data/contact")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from corn_drake.arguments.renamed import add_renamed
-from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import positive_int, seed_int
 
 # The teacher's task (diagrams/tasks/planar.yaml): planar goals, learnable in the demo's minutes.
 TASK = "planar"
@@ -34,7 +34,7 @@ HELP = "run the pipeline end to end at a small default size; prints where each o
 
 def add_arguments(parser):
     parser.add_argument("--out", default="runs/demo", help="output folder")
-    parser.add_argument("--seed", type=nonnegative_int, default=0,
+    parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of every stage (library, contact data, pretraining, teacher)")
     parser.add_argument("--num-objects", type=positive_int, default=14,
                         help="procedural objects in the demo's library (as `objects --num`)")

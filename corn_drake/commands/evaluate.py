@@ -10,13 +10,17 @@ context). Episodes go round-robin over the objects (the run's object, or the --s
 a library: --objects, else the one the run was trained on with `train --objects`); K of them
 are recorded to Meshcat HTML next to the report; `--attention` paints a corn / e2e policy's
 attention on the object's points there and in the live Meshcat (viz/attention_view.py). The
-report's folder (and the recordings') are
-checked writable before the first episode. A progress bar counts the episodes (--no-progress:
-none), the recordings' folder (REPORT_recordings/) is printed at the end, and `--keep-open`
-keeps the Meshcat server, whose URL is printed before the episodes, alive until Ctrl-C.
+report's folder (and the recordings') are checked writable before the first episode, and the
+report is locked while this evaluate works towards it: a second evaluate writing the same file
+meanwhile is refused (storage/file_locks.py). A run's report records the checkpoint file and
+env steps of the weights it measured (`checkpoint`, `env_steps`), which `ship` checks against
+the weights it packs. A progress bar counts the episodes (--no-progress: none), the
+recordings' folder (REPORT_recordings/) is printed at the end, and `--keep-open` keeps the
+Meshcat server, whose URL is printed before the episodes, alive until Ctrl-C.
 
-Which policy: `--run` names a `corn-drake train` run (the teacher), a `corn-drake distill` run
-(the student: its config.yaml is a DistillConfig), or a reference controller. A student is
+Which policy: `--run` names a `corn-drake train` run (the teacher, or with `--policy primitive`
+the contact-primitive policy), a `corn-drake distill` run (the student: its config.yaml is a
+DistillConfig), or a reference controller; rl/run_loading.py loads any of them. A student is
 evaluated through the full perception chain (cameras, geometric segmentation, ICP tracking,
 observation noise) whatever it was trained with, unless `--perception ground_truth` asks for
 the renderer's segmentation (tracking and noise stay on); its report adds `perception` and the
@@ -29,14 +33,12 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import nonnegative_int, positive_int, seed_int
 from corn_drake.errors import InputError
 
 NAME = "evaluate"
 HELP = ("evaluate a trained teacher or student policy (success rate, per object) with Meshcat "
         "recordings")
-# Reference controllers `--run` accepts in place of a run folder (corn_drake/rl/scripted.py).
-REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 
 
 def add_arguments(parser):
@@ -66,7 +68,7 @@ def add_arguments(parser):
                              "task.episode_steps=50, or for a primitive run its executor's, "
                              "e.g. primitive.success_at_rest=true (repeatable; printed and "
                              "recorded in the report; default: none, the run's own settings)")
-    parser.add_argument("--seed", type=nonnegative_int, default=1000,
+    parser.add_argument("--seed", type=seed_int, default=1000,
                         help="base seed: episode k on an object is seeded from it, the object's id "
                              "and k (the same --seed gives the same episodes)")
     parser.add_argument("--stochastic", action="store_true",
@@ -121,15 +123,9 @@ def _object_specs(args, cfg):
 
 
 def run(args) -> int:
-    from corn_drake.config.training import TrainConfig
-    from corn_drake.errors import InputError
-    from corn_drake.evaluation.episodes import evaluate, success_by_group
-    from corn_drake.storage.atomic_files import ensure_writable, write_json
-    from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.checkpoints import load_run_with_step
-    from corn_drake.config.overrides import apply_sets, config_changes
-    from corn_drake.config.diagram_files import load_teacher_config, replace_task
-    from corn_drake.run_folders.config_file import run_kind
+    from corn_drake.rl.run_loading import run_kind_of
+    from corn_drake.storage.atomic_files import ensure_writable
+    from corn_drake.storage.file_locks import locked_output
 
     report_path = Path(args.report)
     out_dir = report_path.parent / f"{report_path.stem}_recordings"
@@ -139,105 +135,72 @@ def run(args) -> int:
     ensure_writable(report_path.parent, "--report")
     if args.record > 0:
         ensure_writable(out_dir, "--record")
-    kind = "reference" if args.run in REFERENCES else run_kind(
-        args.run, or_else=f"a reference ({', '.join(REFERENCES)})")
-    if args.checkpoint and kind not in ("train", "primitive"):
-        raise InputError(f"--checkpoint {args.checkpoint} picks one of a teacher run's kept "
-                         f"checkpoints; --run {args.run} is not a `corn-drake train` run")
+    _refuse_flags(args, run_kind_of(args.run))
+    # One writer per report: a second evaluate into the same file while this one runs is
+    # refused, instead of both ending well with one result overwritten (storage/file_locks.py).
+    # Released once the report is written, before --keep-open's wait.
+    with locked_output(report_path, "--report"):
+        meshcat = _evaluate(args, report_path, out_dir)
+    if meshcat is not None:
+        _wait_for_ctrl_c(meshcat)
+    return 0
+
+
+def _refuse_flags(args, kind: str) -> None:
+    """The flags this kind of run has no use for, refused in one line before anything loads."""
     if args.perception is not None and kind != "distill":
         what = ("a reference controller" if kind == "reference"
                 else "a teacher run (`corn-drake train`)")
         raise InputError(f"--perception {args.perception} applies to a student run (written by "
                          f"`corn-drake distill`); --run {args.run} is {what}")
-    student_cfg, extra = None, {}
-    if args.run in REFERENCES:
-        if args.attention:
-            raise InputError(f"--attention shows a learned policy's cross-attention; --run "
-                             f"{args.run} is a reference controller, which has none")
-        if args.stochastic:
-            raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
-                             "deterministic reference controller")
-        from corn_drake.rl import scripted
+    if kind == "reference" and args.attention:
+        raise InputError(f"--attention shows a learned policy's cross-attention; --run "
+                         f"{args.run} is a reference controller, which has none")
+    if kind == "reference" and args.stochastic:
+        raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
+                         "deterministic reference controller")
 
-        # A reference has no run: --task chooses its task, --set changes that task.
-        base = TrainConfig(env=load_teacher_config(args.task))
-        run_cfg = apply_sets(base, args.set, only="env")
-        agent = getattr(scripted, REFERENCES[args.run])(run_cfg.env.controller)
-        policy = args.run
-    else:
-        # The run's own config: the task, controller and object(s) it was trained on;
-        # --task and --set are overrides of it.
-        if kind == "distill":
-            from corn_drake.rl.checkpoints import load_student_run
 
-            distill_cfg, agent = load_student_run(args.run)
-            student_cfg = distill_cfg.env
-            # The student diagram's teacher part takes --task / --set exactly as a teacher
-            # run's env does.
-            base, policy = TrainConfig(env=student_cfg.teacher), "student"
-        elif kind == "primitive":
-            from corn_drake.rl.primitive.agent import load_primitive_run
+def _evaluate(args, report_path: Path, out_dir: Path):
+    """Loads the run (rl/run_loading.py), runs the episodes and writes the report (the finished
+    episodes' if interrupted); the Meshcat that --keep-open holds, else None."""
+    from corn_drake.evaluation.episodes import evaluate, success_by_group
+    from corn_drake.nn.threads import torch_threads
+    from corn_drake.rl.run_loading import load_any_run
+    from corn_drake.storage.atomic_files import write_json
 
-            base, agent, env_steps = load_primitive_run(args.run, args.checkpoint)
-            policy = base.policy
-            extra = {"env_steps": env_steps, "env_steps_unit": "primitives",
-                     "checkpoint": agent.checkpoint_file, "chooser": base.chooser}
-            if agent.outcome_chooser is not None:
-                extra["outcome_model"] = agent.outcome_chooser.facts
-        else:
-            base, agent, env_steps = load_run_with_step(args.run, args.checkpoint)
-            policy = base.policy
-            # The file the weights came from: prev.pt when last.pt was unusable.
-            extra = {"env_steps": env_steps,
-                     "checkpoint": getattr(agent, "checkpoint_file", args.checkpoint or "last.pt")}
-        if kind == "primitive":
-            from corn_drake.config.diagram_files import primitive_run_on
-
-            # A primitive run's executor settings (its config's `primitive:`) are the policy's
-            # own, so --set reaches them too, e.g. primitive.success_at_rest=true.
-            run_cfg = primitive_run_on(base, args.task, args.set)
-            agent.primitive_config = run_cfg.primitive
-            # An outcome-model chooser predicts the evaluated task's reward and success, and
-            # chooses as the run's `outcome:` settings say, --set included.
-            agent.task = run_cfg.env.task
-            if agent.outcome_chooser is not None:
-                agent.outcome_chooser.use(run_cfg.outcome)
-        else:
-            run_cfg = replace_task(base, args.task) if args.task is not None else base
-            run_cfg = apply_sets(run_cfg, args.set, only="env")
-        if kind == "primitive" and (args.attention or args.stochastic):
-            # Refused before any env is built, in one line naming the flag.
-            flag = "--attention" if args.attention else "--stochastic"
-            raise InputError(f"{flag}: run {args.run} holds the contact-primitive policy, which "
-                             "chooses greedily and has no cross-attention; its Meshcat view "
-                             "(--record, --keep-open) shows its contact point, push and scores")
-        if args.attention and not getattr(agent, "has_attention", False):
-            raise InputError(f"--attention: run {args.run} holds a {policy!r} policy, which has "
-                             "no cross-attention over patches (only corn, e2e, p2v-lite and rot have one)")
-    overrides = config_changes(base, run_cfg)
+    # The run's own config: the task, controller and object(s) it was trained on; --task and
+    # --set are overrides of it.
+    loaded = load_any_run(args.run, args.checkpoint)
+    run_cfg, overrides = loaded.configure(args.task, args.set)
+    if loaded.kind == "primitive" and (args.attention or args.stochastic):
+        # Refused before any env is built, in one line naming the flag.
+        flag = "--attention" if args.attention else "--stochastic"
+        raise InputError(f"{flag}: run {args.run} holds the contact-primitive policy, which "
+                         "chooses greedily and has no cross-attention; its Meshcat view "
+                         "(--record, --keep-open) shows its contact point, push and scores")
+    if args.attention and not getattr(loaded.agent, "has_attention", False):
+        raise InputError(f"--attention: run {args.run} holds a {loaded.policy!r} policy, which "
+                         "has no cross-attention over patches (only corn, e2e, p2v-lite and rot "
+                         "have one)")
     cfg = run_cfg.env
     cfg.check()  # an override no episode can be built from, before any episode
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
     objects = _object_specs(args, cfg)
-    if student_cfg is not None:
-        trained_with = student_cfg.segmentation.mode
+    # Which weights were measured (checkpoint, env_steps): what `ship` checks a report against.
+    extra = loaded.report_fields()
+    if loaded.kind == "distill":
         # Evaluated through the full chain unless --perception says otherwise.
-        student_cfg = dataclasses.replace(
-            student_cfg, teacher=cfg,
-            segmentation=dataclasses.replace(student_cfg.segmentation,
-                                             mode=args.perception or "geometric"))
-        student_cfg.check()
-        cfg = student_cfg
-        extra |= {"trained_perception": trained_with,
-                 "observation_noise": dataclasses.asdict(student_cfg.observation)}
-        print(f"student perception: {student_cfg.segmentation.mode} segmentation + ICP tracking "
-              f"(trained with {trained_with})")
+        cfg, student_fields = loaded.student_env(cfg, args.perception)
+        extra |= student_fields
+        print(f"student perception: {cfg.segmentation.mode} segmentation + ICP tracking "
+              f"(trained with {student_fields['trained_perception']})")
     meshcat = _open_meshcat() if args.keep_open else None
-    # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
+
     def complete_report(report: dict) -> dict:
         report.update(extra)
-        report.update({"run": str(args.run), "policy": policy,
+        report.update({"run": str(args.run), "policy": loaded.policy,
                        "overrides": [dataclasses.asdict(change) for change in overrides],
                        "split": args.split, "actions": "sampled" if args.stochastic else "mean",
                        "library": _library_record(args, run_cfg.env)})
@@ -249,8 +212,9 @@ def run(args) -> int:
         return report
 
     try:
+        # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
         with torch_threads(args.torch_threads):
-            report = evaluate(agent, cfg, objects, args.episodes, args.record, args.seed,
+            report = evaluate(loaded.agent, cfg, objects, args.episodes, args.record, args.seed,
                               out_dir, stochastic=args.stochastic, attention=args.attention,
                               meshcat=meshcat, progress=not args.no_progress)
     except BaseException as e:  # noqa: BLE001 - an interrupt after some episodes: keep them
@@ -268,9 +232,7 @@ def run(args) -> int:
     if recorded:  # the HTML files are the evaluation's pictures: say where they are
         print(f"recordings: {recorded} episode(s) as Meshcat HTML in {out_dir}/ (open one in a "
               "browser; its animation controls replay the episode)")
-    if meshcat is not None:
-        _wait_for_ctrl_c(meshcat)
-    return 0
+    return meshcat
 
 
 def _library_record(args, env_cfg) -> dict | None:

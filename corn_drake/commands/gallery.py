@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from corn_drake.arguments.value_types import nonnegative_int
+from corn_drake.arguments.value_types import seed_int
 
 NAME = "gallery"
 HELP = ("PNG stills (start, middle, end) of a teacher's episodes, coloured by its attention (a "
@@ -32,7 +32,7 @@ def add_arguments(parser):
     parser.add_argument("--objects", required=True, help="object library folder")
     parser.add_argument("--ids", default="",
                         help="comma-separated object ids (default: the first 3 unseen)")
-    parser.add_argument("--seed", type=nonnegative_int, default=1000,
+    parser.add_argument("--seed", type=seed_int, default=1000,
                         help="as evaluate's --seed: each object's first episode of that evaluation")
     parser.add_argument("--out", required=True, help="output folder")
 

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from corn_drake.arguments.value_types import nonnegative_int, positive_int
+from corn_drake.arguments.value_types import positive_int, seed_int
 
 if TYPE_CHECKING:
     from corn_drake.assets.manifest import LibraryObject
 
 # CoACD's hull budget per object unless --max-hulls says otherwise (assets/decompose.py). 8 was
-# measured and not adopted (docs/results/hull_budget/README.md): mugs and bowls lose their
+# measured and not adopted (the hull-budget study's results): mugs and bowls lose their
 # cavities (hull union 1.35-1.78x the mesh) for 10 % more physics speed on those objects.
 DEFAULT_MAX_HULLS = 16
 # The budget of libraries whose arguments.json predates --max-hulls: they were built with 16.
@@ -28,16 +28,20 @@ HELP = "build an object library: --source procedural, or --source PATH (OBJ/STL/
 
 
 def add_arguments(parser):
-    parser.add_argument("--source", default="procedural", help="'procedural' or a mesh folder")
+    parser.add_argument("--source", default="procedural",
+                        help="'procedural' or a mesh folder; each mesh's object id is mesh_ and "
+                             "its path's letters and digits (others made _), and a folder whose "
+                             "files would share an id (cup a.obj, cup_a.obj; Cup.obj, cup.stl) "
+                             "is refused, naming them")
     parser.add_argument("--num", type=positive_int, default=80, help="procedural objects in the full library (train and unseen)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0,
+    parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of the shapes, the train/unseen split and the drops")
     parser.add_argument("--drops", type=positive_int, default=128,
                         help="drops per object for stable poses")
     parser.add_argument("--max-hulls", type=positive_int, default=DEFAULT_MAX_HULLS,
                         help="most convex hulls per object (CoACD max_convex_hull; the authors "
                              "use 16): fewer make contact cheaper to simulate and the shapes "
-                             "coarser (docs/results/hull_budget/README.md)")
+                             "coarser (the hull-budget study's results)")
     parser.add_argument("--split", choices=("train", "unseen"), default=None,
                         help="procedural only: build just the objects of this split of the full "
                              "--num build, identical to theirs (e.g. the unseen objects to "

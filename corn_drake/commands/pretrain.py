@@ -23,7 +23,7 @@ import os
 import shutil
 from pathlib import Path
 
-from corn_drake.arguments.value_types import nonnegative_int, positive_float, positive_int
+from corn_drake.arguments.value_types import positive_float, positive_int, seed_int
 
 NAME = "pretrain"
 HELP = ("pretrain the patch encoder on gripper contact, or on a pretext task (p2v-lite, rot) "
@@ -57,7 +57,7 @@ def add_arguments(parser):
     parser.add_argument("--eval-samples", type=positive_int, default=None,
                         help="held-out samples per evaluation (default: 4096 contact, 1024 "
                              "pretext)")
-    parser.add_argument("--seed", type=nonnegative_int, default=0,
+    parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of the initialisation and the batches")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -77,6 +77,11 @@ def run(args) -> int:
                          "`corn-drake contact-data`)")
     if args.batch_size is None:
         args.batch_size = 1024
+    for model in ["corn", "pointnet"] if args.model == "both" else [args.model]:
+        # Every setting checked (its bounds and relations: --lr below min_lr, say) before
+        # OUT/arguments.json is written.
+        _contact_config(args, model, args.pointnet_steps if model == "pointnet" and
+                        args.pointnet_steps else args.steps).check()
     list_shards(args.data, "train")  # a missing or empty dataset fails before OUT is touched
     out = Path(args.out)
     with lock_folder(out):
@@ -112,12 +117,8 @@ def _pretrain(args, out: Path) -> int:
                       "pointnet_seconds_per_step": per_step}
             print(f"pointnet: {steps} steps = CORN's {results['corn']['train_seconds']:.0f} s "
                   f"at {per_step:.2f} s/step")
-        extra = {} if args.lr is None else {"lr": args.lr}
-        if args.eval_samples is not None:
-            extra["eval_samples"] = args.eval_samples
-        cfg = PretrainConfig(model=model, steps=steps, batch_size=args.batch_size, **extra,
-                             warmup_steps=min(100, max(steps // 10, 1)), eval_every=args.eval_every,
-                             checkpoint_every=args.eval_every, seed=args.seed)
+        cfg = _contact_config(args, model, steps)
+        cfg.check()
         # The equal-time PointNet is its own labelled row: it must never resume, or be mistaken
         # for, the equal-steps one.
         label = "pointnet_equal_time" if budget["kind"] == "equal_wall_clock" else model
@@ -141,6 +142,18 @@ def _pretrain(args, out: Path) -> int:
     write_json(merged_path, merged)
     print(f"wrote {merged_path}")
     return 0
+
+
+def _contact_config(args, model: str, steps: int):
+    """The PretrainConfig of contact model `model` trained for `steps` with the arguments."""
+    from corn_drake.config.pretraining import PretrainConfig
+
+    extra = {} if args.lr is None else {"lr": args.lr}
+    if args.eval_samples is not None:
+        extra["eval_samples"] = args.eval_samples
+    return PretrainConfig(model=model, steps=steps, batch_size=args.batch_size, **extra,
+                          warmup_steps=min(100, max(steps // 10, 1)), eval_every=args.eval_every,
+                          checkpoint_every=args.eval_every, seed=args.seed)
 
 
 def _pretrain_pretext(args, out: Path) -> int:

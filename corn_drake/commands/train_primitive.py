@@ -72,8 +72,7 @@ def checked_config(cfg):
                          "actor and critic in its checkpoints")
     if cfg.chooser != "critic":
         raise InputError(f"chooser {cfg.chooser!r}: TD3 trains the critic's choice; a run that "
-                         "chooses by an outcome model is written by docs/results/primitive/"
-                         "outcome_model.py fit")
+                         "chooses by an outcome model is written by `corn-drake fit-outcome`")
     if cfg.init_from:
         from corn_drake.run_folders.config_file import run_kind
 
@@ -87,6 +86,25 @@ def checked_config(cfg):
 
     training_device(cfg.device, "--device")
     return cfg
+
+
+def _as_recorded_encoder(out, recorded: str, requested: str) -> str:
+    """The recorded encoder name when `requested` names a file with the same bytes as the run's
+    own copy: the run copied the file it was started from to OUT/encoder.pt, so the very command
+    that started it gives another spelling of the same encoder, and resuming with it must not be
+    refused (paths compared by what they hold, not how they are spelled). Else `requested`, so
+    the resume check names the difference."""
+    import filecmp
+    from pathlib import Path
+
+    from corn_drake.rl.checkpoints import run_encoder_path
+
+    if requested == recorded:
+        return requested
+    own, given = Path(run_encoder_path(out, recorded)), Path(requested)
+    if own.is_file() and given.is_file() and filecmp.cmp(own, given, shallow=False):
+        return recorded
+    return requested
 
 
 def run(args) -> int:
@@ -106,6 +124,9 @@ def run(args) -> int:
     with ResumableRun.open(args.out, PrimitiveTrainConfig, resume_required=args.resume,
                            check_new=check_new) as run_folder:
         cfg = checked_config(requested_config(args, run_folder.recorded))
+        if not run_folder.is_new:
+            cfg.encoder = _as_recorded_encoder(run_folder.out, run_folder.recorded.encoder,
+                                               cfg.encoder)
         run_folder.refuse_changes(cfg, may_grow=RESUME_MAY_GROW, may_change=RESUME_MAY_CHANGE,
                                   name=lambda field: f"--set {field}")
         encoder_file = run_encoder_path(run_folder.out, cfg.encoder)

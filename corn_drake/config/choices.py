@@ -9,16 +9,26 @@ CAMERA_MODES = ("fixed", "tracking")
 SEGMENTATION_MODES = ("geometric", "ground_truth")
 # What the student executes of its own action in DAgger: the Gaussian's mean or a sample of it.
 STUDENT_ACTIONS = ("mean", "sample")
-# The contact-primitive policy's candidate locations: the encoder's 16 patch centres ("patch"), or
-# cloud points ("point": PrimitiveTrainConfig.point_locations of them, farthest-point spread, each
-# with its nearest patch's token). Every point of a 512-point cloud is allowed but costs 32x the
-# patch policy's replay (~10 KB per transition) and update time: 64 points cost 3.5x the update
-# (`bench primitive`, back to back: 98.8 vs 28.6 ms, batch 64; docs/results/primitive/), 128
-# points ~6.7x (an ad-hoc timing).
-PRIMITIVE_LOCATIONS = ("patch", "point")
-# The body points the primitive env's progress reward measures the distance to the goal on
-# (PrimitiveConfig.reward_points): the bounding-box corners, or the object's surface cloud.
-PRIMITIVE_REWARD_POINTS = ("keypoints", "cloud")
+# The student's parameter groups, for freezing (DistillConfig.frozen) and for saying what DAgger
+# trains (nn/student.py). The first three come from the contact-pretrained encoder.
+STUDENT_PRETRAINED_GROUPS = ("patch_tokenizer", "hand_token", "transformer")
+STUDENT_PARAMETER_GROUPS = (*STUDENT_PRETRAINED_GROUPS, "task_tokens", "cross_attention", "gru",
+                            "actor")
+# The teacher policy variants (rl/policy_kinds.py says what each is) and the contact-primitive
+# policy: TrainConfig.policy is one of them.
+POLICY_KINDS = ("corn", "e2e", "state", "pn", "p2v-lite", "rot")
+PRIMITIVE_POLICY = "primitive"
+# Which side of object-table contact is compliant (PhysicsConfig.compliant_body).
+COMPLIANT_BODIES = ("object", "table")
+# The impedance controller's torque law implementations (ControllerConfig.torque_backend).
+TORQUE_BACKENDS = ("symbolic", "python")
+# Drake's names for MultibodyPlantConfig's choices the scene is built with (PhysicsConfig.plant).
+CONTACT_MODELS = ("point", "hydroelastic", "hydroelastic_with_fallback")
+DISCRETE_CONTACT_APPROXIMATIONS = ("tamsi", "sap", "similar", "lagged")
+CONTACT_SURFACE_REPRESENTATIONS = ("triangle", "polygon")
 # How a primitive run's agent chooses (PrimitiveTrainConfig.chooser): its critic's scores, or the
 # reward predicted by its outcome model (rl/primitive/outcome/chooser.py; the run's outcome_model.pt).
 PRIMITIVE_CHOOSERS = ("critic", "outcome_model")
+# What an outcome model reads of each candidate (rl/primitive/outcome/model.INPUT_KINDS, the
+# same names): its own numbers, or object-relative ones (`corn-drake fit-outcome --inputs`).
+OUTCOME_INPUT_KINDS = ("raw", "box_contact")

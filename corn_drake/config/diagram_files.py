@@ -98,18 +98,13 @@ def with_primitive_task(base, task: str):
 
 def primitive_run_on(base, task: str | None, sets):
     """A primitive run's config as `evaluate` runs it: `task`'s overlay (None: its own task),
-    then the `--set` items (env.*, primitive.* and outcome.* only); a changed executor or
-    outcome-choice section is range-checked (config/bounds.py), the executor's reward points
-    checked."""
+    then the `--set` items (env.* and primitive.* only); a changed executor section is
+    range-checked (config/bounds.py)."""
     from corn_drake.config.bounds import check_bounds
     from corn_drake.config.overrides import apply_sets
-    from corn_drake.config.primitive import check_reward_points
 
     cfg = with_primitive_task(base, task) if task is not None else base
-    cfg = apply_sets(cfg, sets, only=("env", "primitive", "outcome"))
+    cfg = apply_sets(cfg, sets, only=("env", "primitive"))
     if cfg.primitive != base.primitive:
         check_bounds(cfg.primitive, "primitive.")
-        check_reward_points(cfg.primitive)
-    if cfg.outcome != base.outcome:
-        check_bounds(cfg.outcome, "outcome.")
     return cfg

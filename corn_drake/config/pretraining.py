@@ -9,8 +9,15 @@ real types on the fields.
 
 import dataclasses as dc
 
-from corn_drake.config.bounds import check_bounds
+from corn_drake.config.bounds import check_bounds, one_of, relation
 from corn_drake.errors import InputError
+
+# The contact-pretrained encoders (`pretrain --model corn|pointnet`).
+CONTACT_MODELS = ("corn", "pointnet")
+# The learning rate anneals from lr down to min_lr after a warm-up that must end within the run
+# (pretraining/loop.py): both optimisation configs declare these.
+_SCHEDULE = (relation("min_lr", "<= {lr}", lambda low, lr: low <= lr, "lr"),
+             relation("warmup_steps", "<= {steps}", lambda w, steps: w <= steps, "steps"))
 
 
 @dc.dataclass
@@ -21,7 +28,8 @@ class PretrainConfig:
               "batch_size": ">= 1", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
               "warmup_steps": ">= 0", "max_grad_norm": "> 0", "translate_std": ">= 0",
               "point_noise_std": ">= 0", "eval_every": ">= 1", "checkpoint_every": ">= 1",
-              "eval_samples": ">= 1", "seed": ">= 0"}
+              "eval_samples": ">= 1", "seed": "seed", "model": one_of(CONTACT_MODELS)}
+    RELATIONS = _SCHEDULE
     model: str = "corn"  # corn | pointnet
     steps: int = 2000
     batch_size: int = 1024
@@ -38,8 +46,13 @@ class PretrainConfig:
     eval_samples: int = 4096
     seed: int = 0
 
+    def check(self) -> None:
+        """InputError naming the first field no run can use (before anything is written)."""
+        check_bounds(self)
+
 
 PRETEXT_MODELS = ("p2v-lite", "rot")
+TARGET_NORMS = ("instance", "layer")
 
 
 @dc.dataclass
@@ -51,7 +64,11 @@ class PretextConfig:
               "point_noise_std": ">= 0", "mask_ratio": "(0, 1)", "smooth_l1_beta": "> 0",
               "ema_start_horizon": "> 0", "ema_end_horizon": "> 0", "ema_ramp_fraction": "(0, 1]",
               "eval_every": ">= 1", "checkpoint_every": ">= 1", "eval_samples": ">= 1",
-              "seed": ">= 0"}
+              "seed": "seed", "model": one_of(PRETEXT_MODELS),
+              "target_norm": one_of(TARGET_NORMS)}
+    # The EMA teacher's decay rises over the ramp (see below): its horizon must not shrink.
+    RELATIONS = (*_SCHEDULE, relation("ema_start_horizon", "<= {ema_end_horizon}",
+                                      lambda start, end: start <= end, "ema_end_horizon"))
     model: str = "p2v-lite"  # p2v-lite | rot
     steps: int = 2000
     batch_size: int = 512  # point2vec's

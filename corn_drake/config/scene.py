@@ -9,8 +9,14 @@ import typing
 
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from corn_drake.config.bounds import one_of, relation
+from corn_drake.config.choices import (COMPLIANT_BODIES, CONTACT_MODELS,
+                                       CONTACT_SURFACE_REPRESENTATIONS,
+                                       DISCRETE_CONTACT_APPROXIMATIONS, TORQUE_BACKENDS)
 from corn_drake.config.yaml_io import pickle_as_yaml
+from corn_drake.contract import NUM_JOINTS
 from corn_drake.errors import InputError
+from corn_drake.timing import whole_multiple
 
 
 def _plant_config() -> MultibodyPlantConfig:
@@ -33,7 +39,21 @@ class PhysicsConfig:
     BOUNDS = {
               "policy_period": "> 0", "object_hydroelastic_modulus": "> 0",
               "table_hydroelastic_modulus": "> 0", "table_resolution_hint": "> 0",
-              "object_hunt_crossley_dissipation": ">= 0"}
+              "object_hunt_crossley_dissipation": ">= 0",
+              "compliant_body": one_of(COMPLIANT_BODIES),
+              # One reflected inertia per arm joint (scene/franka.add_franka indexes them).
+              "armature": f"vector {NUM_JOINTS} >= 0",
+              # Drake's plant settings the scene relies on: a discrete plant (the policy clock
+              # counts its steps; 0 would make it continuous), contact as Drake names it (a
+              # misspelt name otherwise fails deep in AddMultibodyPlant, after config.yaml).
+              "plant.time_step": "> 0", "plant.penetration_allowance": "> 0",
+              "plant.stiction_tolerance": "> 0", "plant.sap_near_rigid_threshold": ">= 0",
+              "plant.contact_model": one_of(CONTACT_MODELS),
+              "plant.discrete_contact_approximation": one_of(DISCRETE_CONTACT_APPROXIMATIONS),
+              "plant.contact_surface_representation": one_of(CONTACT_SURFACE_REPRESENTATIONS)}
+    # The policy acts every policy_period: the plant must step there exactly (timing.PolicyClock).
+    RELATIONS = (relation("policy_period", "a whole number (>= 1) of {plant.time_step} steps",
+                          whole_multiple, "plant.time_step"),)
     # Drake's own plant settings (time step, contact model and approximation, ...), passed as
     # they are to AddMultibodyPlant (scene/builder.py). In YAML: physics: {plant: {...}}.
     plant: MultibodyPlantConfig = dc.field(default_factory=_plant_config)
@@ -80,7 +100,10 @@ LIBRARY_OBJECTS = ("one", "train")
 class ObjectConfig:
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {"radius": "> 0",
-              "length": "> 0", "mass": "> 0", "cloud_points": ">= 1"}
+              "length": "> 0", "mass": "> 0", "cloud_points": ">= 1",
+              "kind": one_of(OBJECT_KINDS), "size": "vector 3 > 0",
+              # Which library and object: check() below says which combinations name objects.
+              "library": "text", "library_objects": one_of(LIBRARY_OBJECTS), "object_id": "text"}
     # "box" | "cylinder": a primitive built in code; "library": objects from a library folder.
     kind: str = "box"
     size: list[float] = dc.field(default_factory=lambda: [0.09, 0.07, 0.05])  # box x,y,z
@@ -89,7 +112,7 @@ class ObjectConfig:
     library: str = ""  # folder holding manifest.json (kind: library)
     # Which of the library's objects (kind: library): "one", the object `object_id`, for the
     # whole run; "train", every train object of the library, each env taking the next one
-    # every episode in seeded rounds (rl/vec_env.cycle_object), as `train --objects` sets.
+    # every episode in seeded rounds (rl/envs/vec_env.cycle_object), as `train --objects` sets.
     library_objects: str = "one"
     object_id: str = ""  # id in the library's manifest (library_objects: one)
     mass: float = 0.3
@@ -130,7 +153,7 @@ class RandomizationConfig:
     BOUNDS = {"mass": "range > 0",
               "object_friction": "range >= 0", "table_friction": "range >= 0",
               "finger_friction": "range >= 0", "restitution": "range [0, 1]",
-              "torque_noise_std": ">= 0"}
+              "torque_noise_std": ">= 0", "object_radius": "optional range > 0"}
     enabled: bool = True
     mass: list[float] = dc.field(default_factory=lambda: [0.1, 0.5])
     # Rescale each episode's object to a radius (m) drawn from [low, high]; absent (null), the
@@ -160,7 +183,10 @@ class ControllerConfig:
     BOUNDS = {
               "max_position_delta": "> 0", "max_rotation_delta": "> 0", "kp_range": "range > 0",
               "rho_range": "range >= 0", "ik_damping": ">= 0", "ee_clamp": "> 0",
-              "object_margin": ">= 0"}
+              "object_margin": ">= 0",
+              # Per arm joint; 0 would train a robot that cannot move.
+              "effort_limits": f"vector {NUM_JOINTS} > 0",
+              "torque_backend": one_of(TORQUE_BACKENDS)}
     max_position_delta: float = 0.06  # m, residual EE translation at |a| = 1
     max_rotation_delta: float = 0.1  # rad, residual axis-angle at |a| = 1
     kp_range: list[float] = dc.field(default_factory=lambda: [10.0, 200.0])
@@ -177,6 +203,8 @@ class ControllerConfig:
 
 @dc.dataclass
 class SceneConfig:
+    # Range checks (config/bounds.py): the table box's extent (m) and the arm base's position.
+    BOUNDS = {"table_size": "vector 3 > 0", "robot_base": "vector 3 finite"}
     physics: PhysicsConfig = dc.field(default_factory=PhysicsConfig)
     object: ObjectConfig = dc.field(default_factory=ObjectConfig)
     table_size: list[float] = dc.field(default_factory=lambda: [0.4, 0.5, 0.4])

@@ -14,7 +14,7 @@ import math
 
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config.bounds import check_bounds
+from corn_drake.config.bounds import check_bounds, one_of, relation
 from corn_drake.config.choices import CAMERA_MODES, SEGMENTATION_MODES  # noqa: F401 (re-exported)
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.yaml_io import pickle_as_yaml
@@ -111,8 +111,17 @@ class CameraRigConfig:
     # renderer did: it rasterised the object only). Off by default: our links are primitives
     # (cheap to render) and the segmentation is supposed to remove them.
     hide_robot: bool = False
-    # Range checks (config/bounds.py): what check_bounds refuses.
-    BOUNDS = {"tracking_fov_margin": "> 0"}
+    # Range checks (config/bounds.py): what check_bounds refuses. Of Drake's CameraConfig the
+    # rig relies on its image size and its clipping and depth ranges (check_camera has Drake's
+    # own checks of the rest, and refuses the fields the rig ignores).
+    BOUNDS = {"tracking_fov_margin": "> 0", "mode": one_of(CAMERA_MODES),
+              "eyes": "list vector 3 finite", "look_at": "vector 3 finite",
+              "camera.width": ">= 1", "camera.height": ">= 1", "camera.clipping_near": "> 0",
+              "camera.clipping_far": "> 0", "camera.z_near": "> 0", "camera.z_far": "> 0"}
+    # A camera at the point it looks at has no viewing direction (its pose is undefined).
+    RELATIONS = (relation("eyes", "away from {look_at} (each camera looks from its eye to it)",
+                          lambda eyes, at: all(math.dist(e, at) > 1e-6 for e in eyes),
+                          "look_at"),)
 
     def check(self) -> None:
         check_bounds(self, "cameras.")
@@ -172,7 +181,9 @@ class SegmentationConfig:
     BOUNDS = {"num_points": ">= 1", "crop_height": "> 0", "outlier_radius": "> 0",
               "outlier_reference_px_per_m": "> 0", "outlier_neighbours": ">= 0",
               "dbscan_eps": "> 0", "dbscan_min_eps_pixels": ">= 0", "dbscan_min_points": ">= 1",
-              "max_px_per_m": "> 0"}
+              "max_px_per_m": "> 0", "mode": one_of(SEGMENTATION_MODES),
+              "crop_margin_xy": ">= 0", "table_margin": ">= 0", "robot_margin": ">= 0",
+              "outlier_scaling": one_of(OUTLIER_SCALINGS), "seed": "seed"}
 
     def check(self) -> None:
         check_bounds(self, "segmentation.")
@@ -228,6 +239,8 @@ class StudentObservationConfig:
     # Std of N(0, s) on the goal's position (its first 3 entries), in metres: the paper's
     # N(0, 0.005) goal-pose noise on the normalised input, 2 mm. (The authors' code sets 0.)
     goal_noise_std: float = 0.005 * NORMALISED_UNIT_M
+    # Range checks (config/bounds.py): standard deviations (m).
+    BOUNDS = {"cloud_noise_std": ">= 0", "goal_noise_std": ">= 0"}
 
 
 @dc.dataclass
@@ -240,6 +253,8 @@ class StudentDiagramConfig:
 
     def check(self) -> None:
         """InputError naming the first field the student diagram cannot be built with."""
+        self.teacher.check()  # the scene, task and randomization under the cameras
+        check_bounds(self.observation, "observation.")
         self.cameras.check()
         self.segmentation.check()
         self.tracker.check()

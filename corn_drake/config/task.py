@@ -15,14 +15,27 @@ import dataclasses as dc
 import math
 import typing
 
+from corn_drake.config.bounds import check_bounds, relation
 from corn_drake.contract import NUM_JOINTS
 from corn_drake.errors import InputError
+
+
+def _below(low, high) -> bool:
+    return all(lo < hi for lo, hi in zip(low, high))
+
+
+def _inside(region, low: float, high: float) -> bool:
+    """Whether a [low, high] range lies inside the half-open box side [low, high) the reward's
+    exit test keeps (systems/reward.py: out when p < low or p >= high)."""
+    return low <= region[0] and region[1] < high
 
 
 @dc.dataclass
 class Full6dGoal:
     """The paper's 6D task: the goal is any stable pose of the object (thin objects keep the one
     they start in: pushing cannot stand them up), any yaw, anywhere in the goal region."""
+    # Range checks (config/bounds.py): distances (m).
+    BOUNDS = {"object_min_distance_to_hand": ">= 0", "min_goal_distance": ">= 0"}
     # The object starts at least this far (xy, m) from the tool (official code).
     object_min_distance_to_hand: float = 0.12
     # Goal at least this far (xy, m) from the start. The paper says 0.1 m; the authors' code
@@ -34,6 +47,8 @@ class Full6dGoal:
 class PlanarGoal:
     """A planar goal: the object keeps the stable pose it starts in and is moved `distance` (m,
     in a uniformly random direction) and turned by up to +- `max_yaw` (rad)."""
+    # Range checks (config/bounds.py): distances (m), an angle (rad).
+    BOUNDS = {"object_min_distance_to_hand": ">= 0", "distance": "range >= 0", "max_yaw": ">= 0"}
     object_min_distance_to_hand: float = 0.12
     distance: list[float] = dc.field(default_factory=lambda: [0.1, 0.2])
     max_yaw: float = math.pi
@@ -46,6 +61,9 @@ class PushFromHandGoal:
     of the hand-to-object direction, so one straight push reaches it; same stable pose, turned
     by up to +- `max_yaw`. The defaults are the push benchmark's (diagrams/tasks/push.yaml):
     the shortest push that still needs the hand to find the object, the goal keeping the yaw."""
+    # Range checks (config/bounds.py): distances (m), angles (rad).
+    BOUNDS = {"object_distance_to_hand": "range >= 0", "distance": "range >= 0",
+              "heading_spread": ">= 0", "max_yaw": ">= 0"}
     object_distance_to_hand: list[float] = dc.field(default_factory=lambda: [0.08, 0.11])
     distance: list[float] = dc.field(default_factory=lambda: [0.08, 0.12])
     heading_spread: float = 0.5
@@ -64,7 +82,24 @@ class TaskConfig:
               "episode_steps": ">= 1", "success_position": "> 0", "success_orientation": "> 0",
               "robot_init_noise": ">= 0", "keypoint_k1": ">= 0", "keypoint_k2": ">= 0",
               "hand_k1": ">= 0", "hand_clip": ">= 0", "potential_gamma": "(0, 1]",
-              "success_reward": ">= 0", "energy_coef": ">= 0"}
+              "success_reward": ">= 0", "energy_coef": ">= 0",
+              "name": "text",  # reported by evaluate; the task file's stem unless set
+              "goal_x": "range finite", "goal_y": "range finite",
+              "workspace_low": "vector 3 finite", "workspace_high": "vector 3 finite",
+              "robot_init_low": f"vector {NUM_JOINTS} finite",
+              "robot_init_high": f"vector {NUM_JOINTS} finite"}
+    # An empty workspace ends every episode at its first step; a goal region outside it is a
+    # goal no episode can reach; robot_init is drawn uniformly between low and high. (That the
+    # workspace holds the table's start poses needs the scene: config/teacher.py.)
+    RELATIONS = (
+        relation("workspace_low", "< {workspace_high} on every axis", _below, "workspace_high"),
+        relation("goal_x", "inside the workspace's x (from {workspace_low} to {workspace_high})",
+                 lambda g, lo, hi: _inside(g, lo[0], hi[0]), "workspace_low", "workspace_high"),
+        relation("goal_y", "inside the workspace's y (from {workspace_low} to {workspace_high})",
+                 lambda g, lo, hi: _inside(g, lo[1], hi[1]), "workspace_low", "workspace_high"),
+        relation("robot_init_low", "<= {robot_init_high} for every joint",
+                 lambda lo, hi: all(a <= b for a, b in zip(lo, hi)), "robot_init_high"),
+    )
     # The task's name, reported by `evaluate` and in a run's config (diagrams/tasks/NAME.yaml).
     name: str = "full6d"
     episode_steps: int = 300
@@ -118,3 +153,4 @@ class TaskConfig:
         if len(self.robot_init_low) != NUM_JOINTS or len(self.robot_init_high) != NUM_JOINTS:
             raise InputError(f"task {self.name!r}: task.robot_init_low / robot_init_high need "
                              f"{NUM_JOINTS} joint values each")
+        check_bounds(self, "task.")  # the rest of BOUNDS and RELATIONS (NaN, the workspace)

@@ -7,8 +7,9 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 import typing
 
-from corn_drake.config.bounds import check_bounds
-from corn_drake.config.choices import STUDENT_ACTIONS
+from corn_drake.config.bounds import check_bounds, one_of, relation, subset_of
+from corn_drake.config.choices import (POLICY_KINDS, PRIMITIVE_POLICY, STUDENT_ACTIONS,
+                                       STUDENT_PARAMETER_GROUPS)
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.errors import InputError
@@ -30,14 +31,13 @@ class PPOConfig:
     bound_coef 0.02: paper and code; bound_limit 1.1 and max_grad_norm 1.0: code.
     Entropy bonus 0 (paper and code): none is implemented.
 
-    separate_critic, critic_lr: ours, off by default (the authors share the trunk). With it the
-    value comes from a second head of the same shape on the same (detached) encoder features,
-    trained by its own Adam at the fixed critic_lr on every minibatch of every epoch, whatever
-    the policy's KL does, with its gradient clipped on its own. Why: at our 1-2k-transition
-    batches the KL rule holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a
-    shared critic never fits the returns (docs/results/README.md, the one-step PPO probe).
-    fan_in_lr_ref: ours, 0 (off) by default. > 0 scales the lr of each weight tensor by
-    min(1, fan_in_lr_ref / its fan-in) (rl/ppo/ppo.py fan_in_groups says why).
+    separate_critic, critic_lr: ours, on by default, as every shipped PPO run (push_corn,
+    push_state) was trained (the authors share the trunk: false). With it the value comes from
+    a second head of the same shape on the same (detached) encoder features, trained by its own
+    Adam at the fixed critic_lr on every minibatch of every epoch, whatever the policy's KL
+    does, with its gradient clipped on its own. Why: at our 1-2k-transition batches the KL rule
+    holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a shared critic never
+    fits the returns (the results page, the one-step PPO probe).
     """
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {"gamma": "(0, 1]",
@@ -45,7 +45,11 @@ class PPOConfig:
               "lr": "> 0", "lr_min": "> 0", "lr_max": "> 0", "kl_target": "> 0",
               "kl_stop_factor": "> 0", "policy_coef": ">= 0", "value_coef": ">= 0",
               "bound_coef": ">= 0", "bound_limit": "> 0", "max_grad_norm": "> 0",
-              "critic_lr": "> 0", "fan_in_lr_ref": ">= 0"}
+              "critic_lr": "> 0"}
+    # The adaptive lr moves within [lr_min, lr_max] from lr (rl/ppo): an lr outside it would be
+    # clamped at the first update, or train there (lr_min=1 trained at lr 1.0).
+    RELATIONS = (relation("lr_min", "<= {lr}", lambda low, lr: low <= lr, "lr"),
+                 relation("lr", "<= {lr_max}", lambda lr, high: lr <= high, "lr_max"))
 
     gamma: float = 0.99
     gae_lambda: float = 0.95
@@ -62,9 +66,8 @@ class PPOConfig:
     bound_coef: float = 0.02
     bound_limit: float = 1.1
     max_grad_norm: float = 1.0
-    separate_critic: bool = False
+    separate_critic: bool = True
     critic_lr: float = 3e-4
-    fan_in_lr_ref: int = 0
 
 
 @dc.dataclass
@@ -76,17 +79,19 @@ class RunSettings:
     set of flags (arguments/run_flags.py) and bounds."""
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {
-              "total_steps": ">= 1", "workers": ">= 0", "envs_per_worker": ">= 1", "seed": ">= 0",
-              "checkpoint_every": ">= 1"}
+              "total_steps": ">= 1", "workers": ">= 0", "envs_per_worker": ">= 1", "seed": "seed",
+              "checkpoint_every": ">= 1",
+              # Free text: Ray and the encoder loader say what is wrong with them, with their
+              # flag (--ray-address, --encoder), before anything is written.
+              "ray_address": "text", "encoder": "text",
+              # Its syntax; rl/device.training_device checks this machine has it.
+              "device": "device"}
     total_steps: int = 20_000  # environment steps (transitions) over all envs
     workers: int = 0  # 0: envs in this process; > 0: Ray actors
     envs_per_worker: int = 4
     seed: int = 0
     checkpoint_every: int = 5  # updates (train) or optimiser steps (distill) between checkpoints
     ray_address: str = ""  # a Ray cluster's address; empty: a local Ray
-    # Pin Ray worker w to core w + 1 of its node's usable cores (rl/workers/core_pinning.py; Linux).
-    # For many-core machines; measured by `bench cores` and `bench scale --pin-workers`.
-    pin_workers: bool = False
     # The pretrained encoder checkpoint the policy uses (train: frozen, for corn / pn / p2v-lite
     # / rot; distill: the student's patch encoder starts from it).
     encoder: str = ""
@@ -103,7 +108,11 @@ class RunSettings:
 class TrainConfig(RunSettings):
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {
-              "rollout_steps": ">= 1", "snapshot_every": ">= 0", "init_log_std": "[-20, 5]"}
+              "rollout_steps": ">= 1", "snapshot_every": ">= 0", "init_log_std": "[-20, 5]",
+              # A PPO run's policy: a teacher variant, or the primitive policy (whose runs load
+              # as PrimitiveTrainConfig; `train` sends them there by this field).
+              "policy": one_of((*POLICY_KINDS, PRIMITIVE_POLICY)),
+              "init_from": "text"}  # a run folder: checked by rl/checkpoints.check_init_source
     policy: str = "state"
     rollout_steps: int = 32  # per env and update
     # Keep a copy of the checkpoint as checkpoints/step_NNNNNNNNN.pt each time training passes
@@ -119,14 +128,6 @@ class TrainConfig(RunSettings):
     # lower, since at std 1 every step jitters the hand by most of max_position_delta and a
     # run of a few 100k steps cannot shrink it (Adam moves it ~lr per optimiser step).
     init_log_std: float = 0.0
-    # Normalise the encoder's features (corn/e2e tokens, the pn global feature) per dimension by
-    # a running mean/std before the policy head, as the context is. Ours, off by default (the
-    # authors normalise every non-constant observation by running statistics; whether that
-    # includes the embedding is not stated). Measured: the frozen tokens' attended features
-    # have per-dimension means larger than their spread; normalising them cut the policy's move
-    # under one sign step of lr 1e-5 from KL 0.031 to 0.019, not enough to change how PPO
-    # behaves, and no learning gain was measured (docs/results/README.md).
-    normalize_features: bool = False
     ppo: PPOConfig = dc.field(default_factory=PPOConfig)
     env: TeacherDiagramConfig = dc.field(default_factory=TeacherDiagramConfig)
 
@@ -141,7 +142,10 @@ class DistillConfig(RunSettings):
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {"window": ">= 1",
               "beta_start": "[0, 1]", "beta_anneal_steps": ">= 0", "lr": "> 0",
-              "max_grad_norm": "> 0", "log_every": ">= 1"}
+              "max_grad_norm": "> 0", "log_every": ">= 1",
+              "teacher": "text",  # a run folder: rl/dagger loads and checks it
+              "frozen": subset_of(STUDENT_PARAMETER_GROUPS),
+              "student_action": one_of(STUDENT_ACTIONS)}
     teacher: str = ""  # the teacher's run folder (`corn-drake train --out`)
     # Student parameter groups kept at their initial values (nn/student.PARAMETER_GROUPS).
     frozen: typing.List[str] = dc.field(default_factory=list)

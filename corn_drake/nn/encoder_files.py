@@ -25,6 +25,7 @@ from torch import nn
 
 from corn_drake.errors import InputError, MissingInputError, load_error_detail, network_mismatch
 from corn_drake.storage.atomic_files import atomic_path
+from corn_drake.storage.checkpoint_files import save_torch
 from corn_drake.nn.input_normalization import InputNormalization
 
 ENCODER_KINDS = ("corn", "pointnet", "p2v-lite", "rot")
@@ -78,7 +79,7 @@ def save_encoder(path: str | Path, encoder: NormalizedEncoder, pretraining: dict
     if contact_head is not None:
         state["contact_head"] = contact_head.state_dict()
     with atomic_path(path) as tmp:
-        torch.save(state, tmp)
+        save_torch(tmp, state)  # a full disk raises OSError(ENOSPC), not torch's RuntimeError
 
 
 def load_contact_model(path: str | Path) -> tuple[nn.Module, InputNormalization]:

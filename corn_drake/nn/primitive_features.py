@@ -1,9 +1,8 @@
 """Per-location features of the contact-primitive policy, from the frozen CORN encoder's tokens.
 
-A location is where the policy may touch the object: one of the encoder's patch centres
-("patch": 16 per cloud, each a cloud point) or cloud points ("point": `point_count` of them
-spread by farthest-point sampling, every point when it is the cloud's size, each carrying the
-token of its nearest patch centre). For each location the policy sees
+A location is where the policy may touch the object: one of the encoder's patch centres (16 per
+cloud, each a cloud point; cloud points as locations measured no gain: config/retired.py). For
+each location the policy sees
   tokens (D)  the patch token (the contact-pretrained encoder's summary of that part of the
               object, having attended to the hand token and every other patch);
   local (9)   the location relative to the object's origin, its goal flow (where the goal pose
@@ -21,10 +20,9 @@ import numpy as np
 import torch
 
 from corn_drake.nn.geometry import matrix_from_rot6d
-from corn_drake.nn.patchify import farthest_point_sample, gather_points, patch_indices
+from corn_drake.nn.patchify import gather_points, patch_indices
 
 POSITION_SCALE = 10.0  # metres -> decimetres
-LOCATION_KINDS = ("patch", "point")
 # Where the goal sits in the features (location_features' layout): the rest does not depend on it.
 _GLOBAL_GOAL = slice(0, 9)  # relative goal position (x POSITION_SCALE), then its 6D rotation
 _LOCAL_REL = slice(0, 3)  # the location relative to the object's origin (x POSITION_SCALE)
@@ -58,51 +56,23 @@ def with_goal(features: dict[str, np.ndarray], goal_position: np.ndarray,
     return out
 
 
-def point_candidates(cloud: torch.Tensor, count: int) -> torch.Tensor:
-    """(B, count) cloud indices of the "point" locations: every point when `count` is the
-    cloud's size, else `count` farthest-point samples from point 0 (deterministic, so a display
-    can recompute them: viz/primitive_view.point_locations)."""
-    B, N = cloud.shape[:2]
-    if not 1 <= count <= N:
-        raise ValueError(f"point_count must be in [1, {N}] for a {N}-point cloud, got {count}")
-    if count == N:
-        return torch.arange(N, device=cloud.device).expand(B, N)
-    return farthest_point_sample(cloud, count)
-
-
-def location_features(encoder, obs: dict[str, torch.Tensor], locations: str = "patch",
-                      point_count: int | None = None
+def location_features(encoder, obs: dict[str, torch.Tensor]
                       ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
     """(features {"tokens" (B, L, D), "local" (B, L, 9), "global" (B, 146)}, candidates (B, L):
-    each location's index into the cloud) for a batch of primitive-env observations (torch,
-    batched). `encoder`: a NormalizedEncoder of a patch kind; `point_count`: how many "point"
-    locations (None: every cloud point)."""
-    if locations not in LOCATION_KINDS:
-        raise ValueError(f"locations must be one of {LOCATION_KINDS}, got {locations!r}")
+    each patch centre's index into the cloud) for a batch of primitive-env observations (torch,
+    batched). `encoder`: a NormalizedEncoder of a patch kind."""
     cloud, hand = obs["cloud"], obs["hand_state"]
     network = encoder.network
     center_idx, knn_idx = patch_indices(cloud, network.num_patches, network.patch_size)
     tokens = encoder(cloud, hand, (center_idx, knn_idx))
     hand_token, patch_tokens = tokens[:, 0], tokens[:, 1:]
     p_obj, goal, normals = obs["object_position"], obs["goal"], obs["normals"]
-    if locations == "patch":
-        candidates = center_idx
-        points = gather_points(cloud, candidates)
-        loc_normals = gather_points(normals, candidates)
-        loc_tokens = patch_tokens
-    else:
-        candidates = point_candidates(cloud, cloud.shape[1] if point_count is None
-                                      else int(point_count))
-        points = gather_points(cloud, candidates)
-        loc_normals = gather_points(normals, candidates)
-        centers = gather_points(cloud, center_idx)
-        nearest = torch.cdist(points, centers).argmin(-1)  # (B, L)
-        loc_tokens = torch.gather(patch_tokens, 1,
-                                  nearest.unsqueeze(-1).expand(-1, -1, patch_tokens.shape[-1]))
+    points = gather_points(cloud, center_idx)
+    loc_normals = gather_points(normals, center_idx)
     R_rel = matrix_from_rot6d(goal[:, 3:9])  # goal rotation relative to the object's
     rel = points - p_obj.unsqueeze(1)
     flow = _flow(rel, goal[:, :3], R_rel)
     local = torch.cat([rel * POSITION_SCALE, flow * POSITION_SCALE, loc_normals], -1)
     context = torch.cat([goal[:, :3] * POSITION_SCALE, goal[:, 3:9],
                          (hand[:, :3] - p_obj) * POSITION_SCALE, hand[:, 3:9], hand_token], -1)
-    return {"tokens": loc_tokens, "local": local, "global": context}, candidates
+    return {"tokens": patch_tokens, "local": local, "global": context}, center_idx

@@ -34,6 +34,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from corn_drake.config.choices import STUDENT_PARAMETER_GROUPS, STUDENT_PRETRAINED_GROUPS
 from corn_drake.contract import (ACTION_DIM, CONTEXT_KEYS, POSITION_DIM, STUDENT_OBS_KEYS,
                                  observation_size)
 from corn_drake.nn.corn_encoder import CORNEncoder
@@ -46,8 +47,9 @@ TOKEN_KEYS = tuple(k for k in STUDENT_OBS_KEYS if k not in ("cloud", "hand_state
 
 # Parameter groups, for freezing and for saying what DAgger trains. The first three come from
 # the contact-pretrained encoder (student_io.student_from_encoder copies them).
-PRETRAINED_GROUPS = ("patch_tokenizer", "hand_token", "transformer")
-PARAMETER_GROUPS = (*PRETRAINED_GROUPS, "task_tokens", "cross_attention", "gru", "actor")
+# (config/choices.py holds them: DistillConfig.frozen is checked against them.)
+PRETRAINED_GROUPS = STUDENT_PRETRAINED_GROUPS
+PARAMETER_GROUPS = STUDENT_PARAMETER_GROUPS
 
 
 class StudentOutput(NamedTuple):

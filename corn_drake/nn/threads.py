@@ -2,7 +2,7 @@
 at a given count with the caller's count given back after (the argument itself:
 arguments/torch_threads.py).
 
-Measured on a project machine (2 vCPUs giving one core of throughput), docs/results/README.md:
+Measured on a project machine (2 vCPUs giving one core of throughput), the results page:
 - training, quiet: torch's 2 threads beat 1 by 5 % for `corn` and 20-50 % for `e2e` and `pn`,
   whose PPO updates are heavy (bench policies, the runs' PPO settings, 5 timed updates);
 - training beside one other busy process: 2 threads wait on each other and train 4.5x slower

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.config.training import TrainConfig
-from corn_drake.errors import MissingInputError, load_error_detail
+from corn_drake.errors import InputError, MissingInputError, load_error_detail
 from corn_drake.storage.checkpoint_files import load_checkpoint, load_checkpoint_and_file
 from corn_drake.rl.ppo.agent import TeacherAgent
 from corn_drake.rl.pretrained_encoders import load_encoder
@@ -71,11 +71,10 @@ def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[Train
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
     encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
-    # Runs from before feature normalisation existed hold no feature_normalizer: their
-    # checkpoint, not today's default, says how their network was built.
-    normalize = any(k.startswith("feature_normalizer.") for k in state["agent"])
-    agent = TeacherAgent(cfg.policy, encoder, separate_critic=cfg.ppo.separate_critic,
-                         normalize_features=normalize)
+    if any(k.startswith("feature_normalizer.") for k in state["agent"]):
+        raise InputError(f"{used}: trained with normalize_features, which was retired "
+                         "(config/retired.py); the run cannot be loaded")
+    agent = TeacherAgent(cfg.policy, encoder, separate_critic=cfg.ppo.separate_critic)
     agent.load_saved_state(state["agent"], ckpt)
     agent.eval()
     # The file the weights came from: prev.pt when last.pt was unusable (load_checkpoint).
@@ -87,6 +86,14 @@ def load_student_run(run_dir: str | Path):
     """(DistillConfig, StudentPolicy in eval mode) of a `corn-drake distill` run folder, from its
     config.yaml and checkpoints/last.pt (prev.pt if need be). The student's state_dict carries
     its encoder's input normalisation and token statistics, so no encoder file is read."""
+    cfg, student, _ = load_student_run_with_step(run_dir)
+    return cfg, student
+
+
+def load_student_run_with_step(run_dir: str | Path):
+    """load_student_run's (config, student) and the env steps its checkpoint was distilled for;
+    the student's `checkpoint_file` is the file the weights came from (prev.pt after a
+    fallback), as a teacher's is, so a report can say which weights it measured."""
     from corn_drake.config.loader import load_config
     from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
@@ -100,22 +107,24 @@ def load_student_run(run_dir: str | Path):
                                 "`corn-drake distill`?")
     cfg = load_config(DistillConfig, path)
     ckpt = run_dir / "checkpoints" / "last.pt"
-    state = load_checkpoint(ckpt, required=("kind", "student"))
-    if state is None or state["kind"] != "student":
+    loaded = load_checkpoint_and_file(ckpt, required=("kind", "student"))
+    if loaded is None or loaded[0]["kind"] != "student":
         raise MissingInputError(f"no student checkpoint in {run_dir}: expected {ckpt}")
+    state, used = loaded
     student = StudentPolicy()
     try:
         student.load_state_dict(state["student"])
     except RuntimeError as e:
         raise InputError(f"{ckpt}: the saved student does not fit this version "
                          f"({load_error_detail(e)})") from None
-    return cfg, student.eval()
+    student.checkpoint_file = used.name
+    return cfg, student.eval(), int(state.get("global_step", 0))
 
 
 def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfig:
     """`cfg` with the encoder (when it names none) and, with take_policy, the policy of its
-    init_from run filled in, after checking that the source's agent fits: same policy, critic
-    layout and feature normalisation, the same encoder file. InputError naming --init-from
+    init_from run filled in, after checking that the source's agent fits: same policy and critic
+    layout, the same encoder file. InputError naming --init-from
     otherwise. (The Trainer reads the source's checkpoint, before `train` writes anything.)"""
     import dataclasses
 
@@ -129,8 +138,7 @@ def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfi
     if take_policy:
         cfg = dataclasses.replace(cfg, policy=src.policy)
     for field, ours, theirs in (("policy", cfg.policy, src.policy),
-                                ("ppo.separate_critic", cfg.ppo.separate_critic, src.ppo.separate_critic),
-                                ("normalize_features", cfg.normalize_features, src.normalize_features)):
+                                ("ppo.separate_critic", cfg.ppo.separate_critic, src.ppo.separate_critic)):
         if ours != theirs:
             raise InputError(f"--init-from {source}: its {field} is {theirs!r}, this run's "
                              f"{ours!r}; the agent's weights fit only the same network")

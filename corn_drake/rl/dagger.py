@@ -121,7 +121,7 @@ class DaggerTrainer:
         self.n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         start = sum(self.episodes_per_object.values()) // self.n_envs
         self.envs = make_env_batch(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
-                                   cfg.ray_address, start, pin=cfg.pin_workers)
+                                   cfg.ray_address, start)
 
     @property
     def beta(self) -> float:

@@ -10,7 +10,8 @@ command offers the same ones:
   state     no cloud: bounding-box keypoints and hand pose + MLP head
 """
 
-POLICY_KINDS = ("corn", "e2e", "state", "pn", "p2v-lite", "rot")
+# The names live in config/choices.py, beside the other names a config field is checked against.
+from corn_drake.config.choices import POLICY_KINDS, PRIMITIVE_POLICY
 
 # The encoder.pt kind (nn/encoder_io.ENCODER_KINDS) a policy needs: the kind names the network
 # and how it was pretrained, so `--policy corn` refuses a P2V-lite encoder and the reverse.
@@ -27,5 +28,4 @@ TOKEN_POLICIES = ("corn", "e2e", "p2v-lite", "rot")
 # The contact-primitive policy (rl/primitive/agent.py): the frozen CORN encoder's patch tokens
 # choose where to push; trained off-policy by `train --policy primitive` (rl/primitive/trainer.py),
 # not a PPO variant, so it is not in POLICY_KINDS (the dense comparison's list).
-PRIMITIVE_POLICY = "primitive"
 TRAIN_POLICIES = (*POLICY_KINDS, PRIMITIVE_POLICY)

@@ -19,18 +19,17 @@ def run_env_factory(env_config, seed: int, workers: int, envs_per_worker: int,
 
 
 def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
-                   ray_address: str = "", start_episode: int = 0, pin: bool = False):
+                   ray_address: str = "", start_episode: int = 0):
     """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
     Ray actors stepped in lock step (the DAgger student's; `env_config` a teacher or a student
     diagram config). The PPO trainer collects whole segments instead (rl/workers/segment_workers.py),
-    the primitive trainer rounds of primitives (rl/workers/primitive_workers.py). `pin`: worker w on
-    core w + 1 (rl/workers/core_pinning.py)."""
+    the primitive trainer rounds of primitives (rl/workers/primitive_workers.py)."""
     factory = run_env_factory(env_config, seed, workers, envs_per_worker, start_episode)
     if workers > 0:
         from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
 
         init_ray(ray_address or None)
-        return RayEnvBatch(factory, workers, envs_per_worker, pin)
+        return RayEnvBatch(factory, workers, envs_per_worker)
     return EnvBatch(factory, envs_per_worker)
 
 

@@ -15,6 +15,7 @@ Two guards keep a folder's contents from one coherent job:
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 from contextlib import contextmanager
 from pathlib import Path
@@ -110,9 +111,19 @@ def changed_arguments(recorded: Mapping[str, Any], requested: Mapping[str, Any],
         if key in may_grow and isinstance(old, (int, float)) and isinstance(new, (int, float)):
             if new < old:
                 lines.append(f"{name(key)}: recorded {old!r}, requested {new!r} (it may only grow)")
-        elif old != new:
+        elif not _same_value(old, new):
             lines.append(f"{name(key)}: recorded {old!r}, requested {new!r}")
     return lines
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """Equality where NaN equals NaN: a folder recorded with nan and resumed with nan asks for
+    nothing new (plain != would call them different and refuse the very command that made it)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b))
+    return a == b
 
 
 def refuse_changed_arguments(folder: str | os.PathLike, recorded: Mapping[str, Any],

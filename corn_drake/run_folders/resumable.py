@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from corn_drake.config.loader import load_config
-from corn_drake.config.overrides import config_changes
+from corn_drake.config.overrides import config_changes, set_fields
+from corn_drake.config.yaml_io import config_fields
 from corn_drake.errors import InputError
 from corn_drake.run_folders.config_file import run_config_path, write_run_config
 from corn_drake.run_folders.guards import LOCK_NAME, lock_folder, refuse_config_changes
@@ -43,6 +44,48 @@ def refuse_other_folder(out: Path) -> None:
         shown = ", ".join(found[:5]) + (f" and {len(found) - 5} more" if len(found) > 5 else "")
         raise InputError(f"--out {out} is not a run folder (no {run_config_path(out).name}) and "
                          f"not empty: it holds {shown}; give a new or empty folder")
+
+
+def _refusal(cfg) -> str | None:
+    """The one line today's checks (`cfg.check()`, where the schema has one) give `cfg`, or
+    None when they accept it."""
+    check = getattr(cfg, "check", None)
+    if check is None:
+        return None
+    try:
+        check()
+    except InputError as e:
+        return str(e)
+    return None
+
+
+def fields_refused_as_recorded(recorded, requested) -> set[str]:
+    """The dotted fields whose recorded value today's checks refuse and `requested` corrects.
+
+    A folder can hold a config that today's checks refuse (recorded by an older version, or
+    before a check existed). Holding the user to it would refuse the corrected command forever
+    ("recorded nan, requested 0.5"): a poisoned folder. Each round finds the field whose
+    requested value changes the refusal, takes it, and checks again, until the recorded config
+    with the taken fields is accepted or no requested value helps."""
+    refusal = _refusal(recorded)
+    if refusal is None:
+        return set()
+    differing = [c.key for c in config_changes(recorded, requested)]
+    taken: set[str] = set()
+    current = recorded
+    while refusal is not None:
+        for key in differing:
+            if key in taken:
+                continue
+            trial = set_fields(current, {key: config_fields(requested).get(key)}, "resume")
+            trial_refusal = _refusal(trial)
+            if trial_refusal != refusal:
+                taken.add(key)
+                current, refusal = trial, trial_refusal
+                break
+        else:
+            break
+    return taken
 
 
 @dataclasses.dataclass
@@ -80,8 +123,9 @@ class ResumableRun:
         recorded config other than those that may grow or change, each named by `name` (the
         argument behind a field)."""
         if self.recorded is not None:
+            corrected = fields_refused_as_recorded(self.recorded, cfg)
             refuse_config_changes(self.out, self.recorded, cfg, may_grow=may_grow,
-                                  ignore=may_change, name=name)
+                                  ignore=set(may_change) | corrected, name=name)
 
     def write_config(self, cfg, new_run: str, kind: str = "run", at_step: int | None = None
                      ) -> None:

@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from corn_drake.contract import TABLE_TOP_Z  # noqa: F401 (re-exported: the scene's readers)
 from corn_drake.errors import MissingInputError
-
-TABLE_TOP_Z = 0.4
 
 
 @dataclasses.dataclass

@@ -14,7 +14,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from corn_drake.errors import InputError, MissingInputError
+from corn_drake.errors import InputError, MissingInputError, is_disk_full
 
 
 @contextmanager
@@ -32,6 +32,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as e:
+        # A write that fails (a full disk: ENOSPC) names no file, or the temporary one that
+        # is removed below: name the file being written, for the one line the CLI prints.
+        if is_disk_full(e) and (e.filename is None or str(e.filename) == str(tmp_path)):
+            e.filename = str(path)
+        raise
     finally:
         if tmp_path.exists():
             tmp_path.unlink()

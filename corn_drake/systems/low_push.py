@@ -4,7 +4,7 @@ toward the table (PrimitiveConfig.push_height).
 Why: a horizontal push at height h on an object standing on a base of half-width b (along the
 push) tips it rather than slides it once mu * h > b, mu being the table's friction (0.3-0.8
 here). The encoder's patch centres on an upright bottle or a tall box sit at mid-height, 5-10 cm
-up; most failed push_turn episodes ended tipped or rolled (docs/results/primitive/). Lowering
+up; most failed push_turn episodes ended tipped or rolled (the primitive results log). Lowering
 the fingers alone does not lower the push on a tall object: the palm, deeper than the fingers,
 meets it first, 4.5 cm and more above the tool point (an upright 5 x 5 x 10 cm box tipped
 either way). With the fingers leaning toward the surface as well (finger_tilt_deg,

@@ -35,7 +35,7 @@ class PolicySystem(LeafSystem):
     def __init__(self, agent, num_points: int = DEFAULT_NUM_POINTS, stochastic: bool = False,
                  attention: bool = False):
         """`agent.act(obs)` gives the mean action; with `stochastic`, the system calls
-        `agent.act(obs, unit_noise)` instead (rl/agent.TeacherAgent.act). With `attention`,
+        `agent.act(obs, unit_noise)` instead (rl/ppo/agent.TeacherAgent.act). With `attention`,
         `agent.act_and_attend` gives the action and the attention outputs."""
         super().__init__()
         if attention and not getattr(agent, "has_attention", False):

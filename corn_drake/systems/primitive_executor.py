@@ -18,8 +18,6 @@ input this system feeds in place of a PolicySystem):
             reach_tolerance starts the push; approach_steps ticks without reaching it give the
             primitive up (reported unreached) and go to retreat;
   push      the target moves from the pre-contact point by the motion in push_steps equal steps;
-            with tilt_stop_deg > 0, a push after which the object's up direction has turned
-            further than that since the push began (its box keypoints) retreats at once;
   retreat   up by retreat_height over retreat_steps ticks; then idle (done), or first
   settle    (settle_steps > 0 only) hold the hand where it is until no box keypoint of the object
             moved more than settle_motion over the last tick, at most settle_steps ticks: the
@@ -59,7 +57,6 @@ from corn_drake.contract import (ACTION_DIM, ACTION_SLICES, NUM_JOINTS, PRIMITIV
 from corn_drake.contract import PRIMITIVE_STATUS_DIM as STATUS_DIM
 from corn_drake.contract import PRIMITIVE_STATUS_LAYOUT as STATUS_LAYOUT
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.edge_push import push_kept_on_table
 from corn_drake.systems.observations import ObservationLayout
 from corn_drake.timing import PolicyClock
 from corn_drake.transforms import from_pose9
@@ -78,8 +75,7 @@ _TARGET = slice(16, 19)  # the last commanded target
 _FACING = slice(19, 21)  # the contact normal's horizontal direction (zeros: a top contact)
 _LEAN = 21  # the fingers' lean toward the surface for this primitive (rad; facing_rotation)
 _KEYPOINTS = slice(22, 46)  # the object's box keypoints at the last tick (settle's motion)
-_PUSH_KEYPOINTS = slice(46, 70)  # ... when the push began (tilt_stop_deg's turn)
-_MEMORY_SIZE = 70
+_MEMORY_SIZE = 46
 
 # The palm's lower edge (the finger knuckles) is this far above the tool point: an object whose
 # top is lower than that at the pre-contact point cannot meet the palm, and the fingers stay
@@ -168,12 +164,8 @@ class PrimitivePlanner:
     """The executor's tick as plain numpy: `plan(memory, tool_p, tool_R, top_z, primitive)` ->
     (next memory, action). Kept apart from the LeafSystem so tests can drive it directly."""
 
-    def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig,
-                 table_half_xy=None):
-        if cfg.keep_on_table and table_half_xy is None:
-            raise ValueError("primitive.keep_on_table needs the table's size")
+    def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig):
         self.cfg, self.controller = cfg, controller
-        self._table_half_xy = None if table_half_xy is None else np.asarray(table_half_xy, float)
         self._tilt = np.deg2rad(cfg.finger_tilt_deg)
         self._gains = np.concatenate([np.full(NUM_JOINTS, cfg.stiffness),
                                       np.full(NUM_JOINTS, cfg.damping)])
@@ -187,21 +179,14 @@ class PrimitivePlanner:
     def pre_contact(self, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
         return pre_contact_point(point, normal, self.cfg)
 
-    def _start(self, m: np.ndarray, primitive: np.ndarray, top_z: float,
-               object_xy=None) -> None:
+    def _start(self, m: np.ndarray, primitive: np.ndarray, top_z: float) -> None:
         cfg = self.cfg
         pre = self.pre_contact(primitive[PRIMITIVE_POINT], primitive[PRIMITIVE_NORMAL])
         m[_PHASE], m[_TICKS], m[_APPROACH_TICKS] = APPROACH, 0, 0
         m[_COUNT] += 1
         m[_REACHED], m[_LOCATION] = -1.0, primitive[PRIMITIVE_LOCATION]
         m[_PRE] = pre
-        m[_PUSH] = np.clip(primitive[PRIMITIVE_MOTION], -1.0, 1.0) * cfg.push_distance * \
-            np.array([1.0, 1.0, cfg.vertical_push])
-        if cfg.keep_on_table:
-            if object_xy is None:
-                raise ValueError("primitive.keep_on_table needs the object's position")
-            m[_PUSH] = push_kept_on_table(m[_PUSH], object_xy, self._table_half_xy,
-                                          cfg.table_margin, cfg.pre_contact_distance)
+        m[_PUSH] = np.clip(primitive[PRIMITIVE_MOTION], -1.0, 1.0) * cfg.push_distance
         m[_Z_SAFE] = max(top_z, pre[2]) + cfg.clearance
         normal = np.asarray(primitive[PRIMITIVE_NORMAL], float)
         horizontal = np.linalg.norm(normal[:2])
@@ -217,15 +202,13 @@ class PrimitivePlanner:
         m[_PHASE], m[_TICKS] = phase, 0
 
     def plan(self, memory: np.ndarray, tool_p: np.ndarray, tool_R: np.ndarray, top_z: float,
-             primitive, object_xy=None, keypoints=None) -> tuple[np.ndarray, np.ndarray]:
+             primitive, keypoints=None) -> tuple[np.ndarray, np.ndarray]:
         """`primitive`: a callable giving the primitive input (evaluated only when idle);
-        `object_xy`: the object's centre (needed with keep_on_table); `keypoints`: the
-        object's 8 box keypoints, world frame (needed with settle_steps or tilt_stop_deg)."""
+        `keypoints`: the object's 8 box keypoints, world frame (needed with settle_steps)."""
         cfg, m = self.cfg, np.array(memory, float)
         tol = cfg.reach_tolerance
-        if (cfg.settle_steps or cfg.tilt_stop_deg) and keypoints is None:
-            raise ValueError("primitive.settle_steps and tilt_stop_deg need the object's "
-                             "keypoints")
+        if cfg.settle_steps and keypoints is None:
+            raise ValueError("primitive.settle_steps needs the object's keypoints")
         # Settling ends after a tick over which the object hardly moved (judged here, against
         # the keypoints stored at the last tick, and acted on at the tick's end like the
         # fixed-length phases, so the next primitive starts at an idle tick, as displays and
@@ -238,7 +221,7 @@ class PrimitivePlanner:
         if m[_PHASE] == IDLE:
             offered = np.asarray(primitive(), float)
             if round(offered[PRIMITIVE_SEQUENCE]) == round(m[_COUNT]) + 1:
-                self._start(m, offered, top_z, object_xy)
+                self._start(m, offered, top_z)
         # Transitions that depend on where the tool is now (checked before commanding).
         if m[_PHASE] == APPROACH:
             above = np.array([m[_PRE][0], m[_PRE][1], m[_Z_SAFE]])
@@ -250,12 +233,6 @@ class PrimitivePlanner:
         if m[_PHASE] == DESCEND and np.linalg.norm(tool_p - m[_PRE]) < tol:
             m[_REACHED] = 1.0
             self._enter(m, PUSH)
-            if keypoints is not None:
-                m[_PUSH_KEYPOINTS] = np.asarray(keypoints, float).reshape(-1)
-        # A push that has begun to tip the object stops here: this tick is the retreat's first.
-        if m[_PHASE] == PUSH and cfg.tilt_stop_deg and up_turn(
-                m[_PUSH_KEYPOINTS], keypoints) > np.deg2rad(cfg.tilt_stop_deg):
-            self._enter(m, RETREAT)
         if m[_PHASE] in (APPROACH, DESCEND) and m[_APPROACH_TICKS] >= cfg.approach_steps:
             m[_REACHED] = 0.0
             self._enter(m, RETREAT)
@@ -318,21 +295,8 @@ def memory_status(memory: np.ndarray) -> np.ndarray:
     out[3], out[4] = memory[_REACHED], memory[_LOCATION]
     out[STATUS_LAYOUT["pre_contact"]] = memory[_PRE]
     out[STATUS_LAYOUT["target"]] = memory[_TARGET]
-    out[STATUS_LAYOUT["push"]] = memory[_PUSH]  # as executed (vertical_push, keep_on_table)
+    out[STATUS_LAYOUT["push"]] = memory[_PUSH]
     return out
-
-
-def up_turn(before: np.ndarray, after: np.ndarray) -> float:
-    """The angle (rad) the object's up direction turned between two sets of its 8 box
-    keypoints (world frame): the rotation that best carries one set onto the other (Kabsch,
-    about their centroids), applied to the vertical. A turn about the vertical gives 0."""
-    a = np.asarray(before, float).reshape(-1, 3)
-    b = np.asarray(after, float).reshape(-1, 3)
-    a, b = a - a.mean(axis=0), b - b.mean(axis=0)
-    u, _, vt = np.linalg.svd(a.T @ b)
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # b ~ a rotation^T
-    return float(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0)))
 
 
 def top_height(keypoints: np.ndarray) -> float:
@@ -345,11 +309,9 @@ class PrimitiveExecutor(LeafSystem):
     Outputs: `action` (ACTION_DIM, to ActionToJointTargets), `status` (STATUS_DIM)."""
 
     def __init__(self, cfg: PrimitiveConfig, controller: ControllerConfig, clock: PolicyClock,
-                 num_points: int, table_size=None):
+                 num_points: int):
         super().__init__()
-        # table_size: the scene's (x, y, z) table box, centred on the origin (keep_on_table).
-        self.planner = PrimitivePlanner(
-            cfg, controller, None if table_size is None else np.asarray(table_size[:2]) / 2)
+        self.planner = PrimitivePlanner(cfg, controller)
         self._layout = ObservationLayout(num_points)
         self._obs = self.DeclareVectorInputPort("observation", self._layout.size)
         self._primitive = self.DeclareVectorInputPort("primitive", PRIMITIVE_DIM)
@@ -377,8 +339,7 @@ class PrimitiveExecutor(LeafSystem):
         keypoints = np.asarray(obs[s["object_keypoints"]]).reshape(-1, 3)
         value.set_value(self.planner.plan(
             context.get_discrete_state(self._memory).value(), tool_p, tool_R,
-            top_height(keypoints), lambda: self._primitive.Eval(context),
-            keypoints[:, :2].mean(axis=0), keypoints))
+            top_height(keypoints), lambda: self._primitive.Eval(context), keypoints))
 
     def _update(self, context, discrete_state):
         discrete_state.set_value(self._memory, self._plan.Eval(context)[0])

@@ -33,11 +33,6 @@ from corn_drake.timing import PolicyClock
 
 
 
-def num_locations(agent, num_points: int) -> int:
-    """How many candidate locations the agent scores per observation of `num_points` points."""
-    return agent.location_count(num_points)
-
-
 class PrimitivePolicySystem(LeafSystem):
     def __init__(self, agent, num_points: int, clock: PolicyClock):
         super().__init__()
@@ -59,11 +54,11 @@ class PrimitivePolicySystem(LeafSystem):
         # cached forward pass), held for displays and tests: [cloud index, location index,
         # motion (3), scores (L)]. Reading it never runs the network.
         self._held = self.DeclareDiscreteState(
-            np.full(CHOICE_DIM + num_locations(agent, num_points), -1.0))
+            np.full(CHOICE_DIM + agent.location_count(), -1.0))
         self.DeclarePeriodicDiscreteUpdateEvent(clock.period, clock.offset, self._record)
         held = {self.discrete_state_ticket(self._held)}
         self.DeclareVectorOutputPort("choice", CHOICE_DIM, self._held_slice(0, CHOICE_DIM), held)
-        self.DeclareVectorOutputPort("scores", num_locations(agent, num_points),
+        self.DeclareVectorOutputPort("scores", agent.location_count(),
                                      self._held_slice(CHOICE_DIM, None), held)
 
     def observation(self, context) -> dict[str, np.ndarray]:

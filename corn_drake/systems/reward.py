@@ -55,7 +55,7 @@ def pose_errors(p, R, p_goal, R_goal) -> tuple[float, float]:
 
 def within_tolerance(cfg, position_error: float, orientation_error: float) -> bool:
     """The task's success rule on pose_errors' two errors: `cfg` has success_position,
-    check_orientation and success_orientation (a TaskConfig, or rl/hindsight's HindsightRule)."""
+    check_orientation and success_orientation (a TaskConfig, or rl/primitive/hindsight's HindsightRule)."""
     return position_error <= cfg.success_position and (
         not cfg.check_orientation or orientation_error <= cfg.success_orientation)
 

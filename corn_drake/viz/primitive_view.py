@@ -4,11 +4,10 @@ For every primitive the executor starts it draws, under `<path>/primitive_NNN` (
 executor's count of primitives started, 1 for the first):
   contact  a small red sphere at the chosen contact point;
   arrow    the push as the executor runs it, from the pre-contact point to where the push ends
-           (both from the executor's status: the motion scaled by push_distance and
-           vertical_push, shortened near the table's edge with keep_on_table);
+           (both from the executor's status: the motion scaled by push_distance);
   scores   with a policy in the diagram: the object's cloud coloured viridis by the policy's score
-           of each point's candidate location (its nearest patch centre; every point is its own
-           location when the policy scores points), lowest dark purple, highest yellow.
+           of each point's candidate location (its nearest patch centre), lowest dark purple,
+           highest yellow.
 Where the contact point comes from: with a policy, its held `choice` (the cloud index, recorded
 at the tick the executor took the primitive) and the cloud; without one (the gymnasium env), the
 executor's `primitive` input, which the env fixes for each primitive.
@@ -54,18 +53,15 @@ def primitive_path(path: str, count: int) -> str:
     return f"{path}/primitive_{count:03d}"
 
 
-def point_locations(cloud: np.ndarray, num_locations: int) -> np.ndarray:
+def nearest_locations(cloud: np.ndarray, num_locations: int) -> np.ndarray:
     """(N,) index of each cloud point's candidate location among the policy's `num_locations`:
-    the point itself when the policy scores every point, else its nearest patch centre, the
-    centres being the cloud's farthest-point samples exactly as the policy's features pick them
-    (nn/patchify: deterministic, from point 0)."""
+    its nearest patch centre, the centres being the cloud's farthest-point samples exactly as
+    the policy's features pick them (nn/patchify: deterministic, from point 0)."""
     import torch
 
     from corn_drake.nn.patchify import farthest_point_sample
 
     cloud = np.asarray(cloud, np.float32).reshape(-1, POSITION_DIM)
-    if num_locations == len(cloud):
-        return np.arange(len(cloud))
     if not 1 <= num_locations < len(cloud):
         raise ValueError(f"num_locations must be in [1, {len(cloud)}], got {num_locations}")
     points = torch.from_numpy(cloud)[None]
@@ -168,7 +164,7 @@ class PrimitiveView(LeafSystem):
 
     def _draw_scores(self, path: str, cloud: np.ndarray, scores: np.ndarray) -> None:
         scores = np.asarray(scores, float)
-        per_point = scores[point_locations(cloud, len(scores))]
+        per_point = scores[nearest_locations(cloud, len(scores))]
         drawn = PointCloud(len(cloud), Fields(BaseField.kXYZs | BaseField.kRGBs))
         drawn.mutable_xyzs()[:] = cloud.T
         # Critic scores may be negative: colour by where each lies between the lowest and the

@@ -8,16 +8,11 @@ the policy clock period after period (each the teacher env's step: 8 physics ste
 executor is idle again, the task succeeds, the object leaves the workspace, the simulation
 fails, or the task's episode_steps run out. The reward is PrimitiveConfig.progress_reward times
 how much the primitive closed the mean distance between the object's bounding-box keypoints and
-the goal's (the paper's keypoints: position and the full 3-D orientation; or, with
-reward_points "cloud", between its surface cloud's points and theirs at the goal), minus
-exit_penalty if the object left the workspace, plus turn_reward
-times how much it closed the rotation to the goal (rad; 0 by default), plus the task's
+the goal's (the paper's keypoints: position and the full 3-D orientation), plus the task's
 success_reward on success; info["task_reward"] keeps the teacher's per-period rewards summed.
 
-Episode end: success, out of workspace, or (with PrimitiveConfig.tip_penalty on a task whose goal
-keeps the face) the object tipped onto another face (terminated, info["tipped"]); max_primitives
-primitives (HACMan's 10) or the task's episode_steps of policy periods (truncated), whichever
-comes first. With PrimitiveConfig.success_at_rest a success mid-primitive does not end the step:
+Episode end: success or out of workspace (terminated); max_primitives primitives (HACMan's 10)
+or the task's episode_steps of policy periods (truncated), whichever comes first. With PrimitiveConfig.success_at_rest a success mid-primitive does not end the step:
 the primitive runs to its end, and the success stands only if the object is then still at the
 goal (the in-diagram path judges the same way, at the period the executor is idle).
 
@@ -37,7 +32,7 @@ import numpy as np
 
 from corn_drake.config.bounds import check_bounds
 from corn_drake.config.diagram_files import load_teacher_config
-from corn_drake.config.primitive import PrimitiveConfig, at_rest, check_reward_points
+from corn_drake.config.primitive import PrimitiveConfig, at_rest
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
@@ -46,7 +41,6 @@ from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.low_push import push_contact
 from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM, STATUS_LAYOUT,
                                                    make_primitive)
-from corn_drake.tasks.faces import TIPPED_ANGLE_RAD, face_error, goal_keeps_face
 
 PRIMITIVE_OBS_KEYS = ("normals", "object_position", "executor", "object_speed")
 
@@ -91,7 +85,6 @@ class PrimitiveEnv(DiagramEnv):
         self.cfg, self.primitive_cfg = config, primitive or PrimitiveConfig()
         # A PrimitiveConfig made in code is checked as a run's config is (its ranges too).
         check_bounds(self.primitive_cfg, "primitive.")
-        check_reward_points(self.primitive_cfg)
         self.handles = build_primitive_diagram(config, self.primitive_cfg, spec, meshcat, agent)
         super().__init__(self.handles.teacher, meshcat, agent_acts=True)
         self._agent_inside = agent is not None
@@ -153,7 +146,7 @@ class PrimitiveEnv(DiagramEnv):
         aim, normal = push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
         primitive = make_primitive(aim, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
-        distance_before, turn_before = self.progress_distance(), self.rotation_to_goal()
+        distance_before = self.keypoint_distance()
         total, ticks = 0.0, 0
         while True:
             obs, reward, terminated, truncated, info = super().step(None)
@@ -178,17 +171,9 @@ class PrimitiveEnv(DiagramEnv):
                                   self.primitives >= self.primitive_cfg.max_primitives)
         info.update({"ticks": ticks, "reached": bool(status[STATUS_LAYOUT["reached"]] > 0),
                      "primitive": primitive, "task_reward": total})
-        reward = self.primitive_cfg.progress_reward * (distance_before - self.progress_distance())
-        if self.primitive_cfg.turn_reward:
-            reward += self.primitive_cfg.turn_reward * (turn_before - self.rotation_to_goal())
+        reward = self.primitive_cfg.progress_reward * (distance_before - self.keypoint_distance())
         if info["status"]["success"] > 0:
             reward += self.cfg.task.success_reward
-        elif info["status"]["out_of_workspace"] > 0:
-            reward -= self.primitive_cfg.exit_penalty
-        elif not terminated and self._tipped():
-            reward -= self.primitive_cfg.tip_penalty
-            terminated, truncated = True, False
-            info["tipped"] = True
         return obs, reward, terminated, truncated, info
 
     def _success_waits(self, info: dict) -> bool:
@@ -217,54 +202,24 @@ class PrimitiveEnv(DiagramEnv):
     def _counters(self) -> dict:
         return {**super()._counters(), "primitives": self.primitives}
 
-    def _tipped(self) -> bool:
-        """Whether the tipping rule (PrimitiveConfig.tip_penalty) ends this episode: it is on,
-        the task's goal keeps the face, and the object now rests on another one."""
-        return self.primitive_cfg.tip_penalty > 0 and goal_keeps_face(self.cfg.task) and \
-            face_error(self.object_pose(), self.episode.goal_pose) > TIPPED_ANGLE_RAD
-
-    def rotation_to_goal(self) -> float:
-        """The angle (rad) of the rotation between the object's orientation and the goal's: the
-        task's own orientation error (systems/reward.pose_errors)."""
-        from corn_drake.systems.reward import pose_errors
-        from corn_drake.transforms import quat_wxyz_to_matrix
-
-        pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
-        return pose_errors(pose[:3], quat_wxyz_to_matrix(pose[3:]), goal[:3],
-                           quat_wxyz_to_matrix(goal[3:]))[1]
-
-    def progress_distance(self) -> float:
-        """The distance the progress reward closes: keypoint_distance, or cloud_distance with
-        PrimitiveConfig.reward_points "cloud"."""
-        if self.primitive_cfg.reward_points == "cloud":
-            return self.cloud_distance()
-        return self.keypoint_distance()
-
-    def keypoint_distance(self) -> float:
-        """Mean distance (m) between the object's bounding-box keypoints now and at the goal
-        (the reward's keypoints, systems/reward.keypoints_at: the height of the object's origin
-        dropped, its tilt kept)."""
-        return self._distance_to_goal("object_keypoints")
-
-    def cloud_distance(self) -> float:
-        """The same over the points of the object's surface cloud (its body-frame points, as
-        the observation's cloud places them): the mean length of HACMan's goal flow."""
-        return self._distance_to_goal("object_cloud")
-
     def body_points(self, source: str = "object_keypoints") -> np.ndarray:
-        """(P, 3) points of the object in its body frame: its bounding-box keypoints (the
-        reward's, "object_keypoints") or its surface cloud ("object_cloud")."""
+        """(P, 3) points of the object in its body frame, from the teacher's per-episode
+        `source`: its bounding-box keypoints (the reward's) by default."""
         system = self.handles.teacher.sources[source]
         return system.get_source_value(system.GetMyContextFromRoot(self.context)
                                        ).value().reshape(-1, POSITION_DIM)
 
-    def _distance_to_goal(self, source: str) -> float:
+    def keypoint_distance(self) -> float:
+        """Mean distance (m) between the object's bounding-box keypoints now and at the goal:
+        the distance the progress reward closes (the reward's keypoints,
+        systems/reward.keypoints_at: the height of the object's origin dropped, its tilt
+        kept)."""
         from corn_drake.systems.reward import keypoints_at
         from corn_drake.transforms import quat_wxyz_to_matrix
 
         pose, goal = self.object_pose(), np.asarray(self.episode.goal_pose, float)
         R = quat_wxyz_to_matrix(pose[3:])
-        points = self.body_points(source)
+        points = self.body_points()
         d = keypoints_at(points, pose[:3], R) - keypoints_at(points, goal[:3],
                                                             quat_wxyz_to_matrix(goal[3:]))
         return float(np.linalg.norm(d, axis=1).mean())

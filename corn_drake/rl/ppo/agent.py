@@ -29,6 +29,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from corn_drake.config.training import PPOConfig
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
 from corn_drake.errors import InputError, load_error_detail
 from corn_drake.nn.attention import PatchAttention, nearest_patch, patch_scores
@@ -60,7 +61,7 @@ def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str | None
 
 class TeacherAgent(nn.Module):
     def __init__(self, kind: str, encoder: nn.Module | None = None, feature_dim: int | None = None,
-                 separate_critic: bool = False, normalize_features: bool = False):
+                 separate_critic: bool = PPOConfig.separate_critic):
         super().__init__()
         if kind not in POLICY_KINDS:
             raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")
@@ -84,12 +85,6 @@ class TeacherAgent(nn.Module):
             self.state_normalization = InputNormalization()
         self.log_std = self.head.log_std
         self.context_normalizer = RunningMeanStd((CONTEXT_DIM,))
-        # Per feature dimension (the token width for corn/e2e, the global feature for pn);
-        # TrainConfig.normalize_features says why. None: features go in as the encoder gives them.
-        self.feature_normalizer = None
-        if normalize_features and kind != "state":
-            width = self.head.token_dim if kind in TOKEN_POLICIES else (feature_dim or 1024)
-            self.feature_normalizer = RunningMeanStd((width,))
 
     @staticmethod
     def _make_head(kind: str, feature_dim: int | None) -> nn.Module:
@@ -128,15 +123,6 @@ class TeacherAgent(nn.Module):
     def update_normalizer(self, context: torch.Tensor) -> None:
         self.context_normalizer.update(context)
 
-    def update_normalizers(self, obs: dict[str, torch.Tensor]) -> None:
-        """After a PPO update, from the batch it used: the context's statistics, and the
-        features' when they are normalised (the frozen encoders' cached `features`, else the
-        encoder run again without gradients)."""
-        self.update_normalizer(obs["context"])
-        if self.feature_normalizer is not None:
-            with torch.no_grad():
-                self.feature_normalizer.update(self.features(obs))
-
     def normalized_context(self, context: torch.Tensor) -> torch.Tensor:
         return self.context_normalizer.normalize(context)
 
@@ -159,8 +145,6 @@ class TeacherAgent(nn.Module):
 
     def forward(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         features, context = self.features(obs), self.normalized_context(obs["context"])
-        if self.feature_normalizer is not None:
-            features = self.feature_normalizer.normalize(features)
         mu, value = self.head(features, context)
         if self.critic_head is not None:
             value = self.critic_head(features.detach(), context)[1]
@@ -201,8 +185,6 @@ class TeacherAgent(nn.Module):
             points = norm.points(t["cloud"])
             indices = patch_indices(points, network.num_patches, network.patch_size)
             tokens = self.encoder(t["cloud"], t["hand_state"], indices)
-            if self.feature_normalizer is not None:  # as forward() does
-                tokens = self.feature_normalizer.normalize(tokens)
             mu, _, weights = self.head.forward_with_weights(
                 tokens, self.normalized_context(t["context"]))
             scores, hand = patch_scores(weights)

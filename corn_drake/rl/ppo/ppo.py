@@ -53,27 +53,6 @@ def gaussian_log_prob(mu: torch.Tensor, log_std: torch.Tensor, actions: torch.Te
     return torch.distributions.Normal(mu, log_std.exp()).log_prob(actions).sum(-1)
 
 
-def fan_in_groups(params, ref: int) -> list[dict]:
-    """Adam parameter groups whose lr is scaled by min(1, ref / fan-in) (the weight tensors of
-    layers wider than `ref` inputs; biases and norms keep 1). ref 0 puts everything in one
-    group at scale 1.
-
-    Why: Adam moves every weight by about the lr whatever its gradient, so a layer's output moves
-    by about lr x the L1 norm of its inputs, which grows with its fan-in. In the token policies'
-    2,096-wide first layer one step of 1e-5 alone spends more than the KL target
-    (docs/results/README.md, the sensitivity probe), and the KL rule then holds every layer
-    at that lr."""
-    params = list(params)
-    if ref <= 0:
-        return [{"params": params, "lr_scale": 1.0}]
-    by_scale: dict[float, list] = {}
-    for p in params:
-        fan_in = p[0].numel() if p.dim() >= 2 else 0
-        scale = min(1.0, ref / fan_in) if fan_in else 1.0
-        by_scale.setdefault(scale, []).append(p)
-    return [{"params": ps, "lr_scale": s} for s, ps in sorted(by_scale.items(), reverse=True)]
-
-
 class PPO:
     """`policy(obs) -> (mu, value)` with a `log_std` parameter; `update` takes flat batches."""
 
@@ -89,13 +68,10 @@ class PPO:
             raise ValueError("the policy has a separate critic head but ppo.separate_critic is off")
         if critic and not self.cfg.critic_lr > 0:
             raise ValueError(f"ppo.critic_lr must be > 0, got {self.cfg.critic_lr}")
-        if self.cfg.fan_in_lr_ref < 0:
-            raise ValueError(f"ppo.fan_in_lr_ref must be >= 0 (0: off), got {self.cfg.fan_in_lr_ref}")
         actor = (policy.actor_parameters() if critic
                  else [p for p in policy.parameters() if p.requires_grad])
         self.actor_params, self.critic_params = actor, critic
-        self.optimizer = torch.optim.Adam(fan_in_groups(actor, self.cfg.fan_in_lr_ref), lr=self.lr)
-        self._apply_lr()
+        self.optimizer = torch.optim.Adam(actor, lr=self.lr)
         # Its own Adam at a fixed lr: the KL rule and the early stop are about the policy.
         self.critic_optimizer = torch.optim.Adam(critic, lr=self.cfg.critic_lr) if critic else None
 
@@ -109,7 +85,7 @@ class PPO:
 
     def _apply_lr(self) -> None:
         for group in self.optimizer.param_groups:
-            group["lr"] = self.lr * group["lr_scale"]
+            group["lr"] = self.lr
 
     def losses(self, obs: Obs, actions, old_log_prob, advantages, returns) -> dict[str, torch.Tensor]:
         c = self.cfg
@@ -196,14 +172,11 @@ class PPO:
     def load_state_dict(self, state: dict) -> None:
         if (self.critic_optimizer is not None) != ("critic_optimizer" in state):
             raise ValueError("the saved PPO state and this run disagree on ppo.separate_critic")
-        saved_scales = [g.get("lr_scale", 1.0) for g in state["optimizer"]["param_groups"]]
-        scales = [g["lr_scale"] for g in self.optimizer.param_groups]
-        if saved_scales != scales:
-            raise ValueError(f"the saved PPO state and this run disagree on ppo.fan_in_lr_ref "
-                             f"(per-group lr scales {saved_scales} saved, {scales} now)")
+        if any(g.get("lr_scale", 1.0) != 1.0 for g in state["optimizer"]["param_groups"]):
+            # Per-layer lr groups: a state saved with the retired ppo.fan_in_lr_ref.
+            raise ValueError("the saved PPO state was written with ppo.fan_in_lr_ref, which was "
+                             "retired (config/retired.py); it cannot be resumed")
         self.optimizer.load_state_dict(state["optimizer"])
-        for group, scale in zip(self.optimizer.param_groups, scales):  # states saved before it
-            group["lr_scale"] = scale
         if self.critic_optimizer is not None:
             self.critic_optimizer.load_state_dict(state["critic_optimizer"])
         self.lr = state["lr"]

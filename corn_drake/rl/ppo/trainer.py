@@ -69,9 +69,7 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.generator = torch.Generator().manual_seed(cfg.seed)
-        self.agent = TeacherAgent(cfg.policy, encoder,
-                                  separate_critic=cfg.ppo.separate_critic,
-                                  normalize_features=cfg.normalize_features)
+        self.agent = TeacherAgent(cfg.policy, encoder, separate_critic=cfg.ppo.separate_critic)
         with torch.no_grad():
             self.agent.log_std.fill_(cfg.init_log_std)
         self.agent.to(self.device)  # before the optimiser takes its parameters
@@ -104,8 +102,7 @@ class Trainer:
             from corn_drake.rl.workers.segment_workers import RaySegmentCollectors
 
             init_ray(cfg.ray_address or None)
-            return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent,
-                                        pin=cfg.pin_workers)
+            return RaySegmentCollectors(factory, cfg.workers, cfg.envs_per_worker, self.agent)
         return SegmentCollector(EnvBatch(factory, cfg.envs_per_worker), self.agent, self.device)
 
     @property
@@ -202,7 +199,7 @@ class Trainer:
                                     stack["logp"].flatten(0, 1), adv.flatten(), ret.flatten(),
                                     self.generator)
             # Normalisers move after the update so collection and update saw the same inputs.
-            self.agent.update_normalizers(flat_obs)
+            self.agent.update_normalizer(flat_obs["context"])
             steps = cfg.rollout_steps * n_envs
             self.global_step += steps
             self.update_index += 1

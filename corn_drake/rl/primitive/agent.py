@@ -42,11 +42,9 @@ class PrimitiveAgent(nn.Module):
     kind = AGENT_KIND
     has_attention = False  # the dense policies' patch attention; this one shows its scores
 
-    def __init__(self, encoder, locations: str = "patch", hidden: int = 256,
-                 primitive_config=None, point_locations: int = 64):
+    def __init__(self, encoder, hidden: int = 256, primitive_config=None):
         """`primitive_config`: how the executor runs the primitives (PrimitiveConfig; the
-        default one when None): which locations it would give up decides the mask.
-        `point_locations`: how many cloud points a "point" agent scores."""
+        default one when None): which locations it would give up decides the mask."""
         super().__init__()
         from corn_drake.config.primitive import PrimitiveConfig
 
@@ -57,13 +55,12 @@ class PrimitiveAgent(nn.Module):
         self.encoder = encoder
         for p in self.encoder.parameters():
             p.requires_grad_(False)
-        self.locations, self.hidden = locations, hidden
-        self.point_locations = int(point_locations)
+        self.hidden = hidden
         dim = encoder.network.dim
         self.actor = PrimitiveActor(dim, LOCAL_DIM, global_dim(dim), hidden)
         self.critic = PrimitiveCritic(dim, LOCAL_DIM, global_dim(dim), hidden)
         # Set by load_primitive_run for a run that chooses by its outcome model
-        # (rl/outcome_chooser.OutcomeChooser), with the task whose reward it predicts (evaluate
+        # (rl/primitive/outcome/chooser.OutcomeChooser), with the task whose reward it predicts (evaluate
         # replaces it with the evaluated task's).
         self.outcome_chooser = None
         self.task = None
@@ -78,8 +75,7 @@ class PrimitiveAgent(nn.Module):
         cannot repeat a primitive that does nothing episode-long."""
         _, batch = obs_to_torch(obs)
         self.encoder.eval()
-        features, candidates = location_features(self.encoder, batch, self.locations,
-                                                 self.point_locations)
+        features, candidates = location_features(self.encoder, batch)
         features["mask"] = self._reachable(batch, candidates)
         return features, candidates
 
@@ -94,7 +90,7 @@ class PrimitiveAgent(nn.Module):
     def scores_and_motions(self, features: dict[str, torch.Tensor]
                            ) -> tuple[torch.Tensor, torch.Tensor]:
         """(per-location scores, -inf where features["mask"] rules a location out; the actor's
-        motions): rl/td3.scores_and_motions with this agent's networks."""
+        motions): rl/primitive/td3.scores_and_motions with this agent's networks."""
         from corn_drake.rl.primitive.td3 import scores_and_motions
 
         return scores_and_motions(self.actor, self.critic, features)
@@ -122,46 +118,32 @@ class PrimitiveAgent(nn.Module):
                 "candidates": candidates[0].numpy(),
                 "motions": motions[0].numpy().astype(np.float64)}
 
-    def location_count(self, num_points: int) -> int:
-        """How many candidate locations the agent scores per observation of `num_points`."""
-        if self.locations == "patch":
-            return self.encoder.network.num_patches
-        return min(self.point_locations, num_points)
-
-    def _shape(self) -> tuple:
-        """What a saved state must match to be this agent's: its locations and width."""
-        points = self.point_locations if self.locations == "point" else None
-        return self.locations, points, self.hidden
+    def location_count(self) -> int:
+        """How many candidate locations (patch centres) the agent scores per observation."""
+        return self.encoder.network.num_patches
 
     def network_state(self) -> dict:
-        return {"locations": self.locations, "point_locations": self.point_locations,
-                "hidden": self.hidden,
+        return {"hidden": self.hidden,
                 "actor": self.actor.state_dict(), "critic": self.critic.state_dict()}
 
-    def load_network_state(self, state: dict, source, heads_only: bool = False) -> None:
-        """The actor's and critic's weights from network_state(). `heads_only`: accept an agent
-        of other locations (the heads score each location alone, so a patch policy's heads
-        score points as they score patch centres: a start for a point run, `init_from`)."""
+    def load_network_state(self, state: dict, source) -> None:
+        """The actor's and critic's weights from network_state()."""
         from corn_drake.errors import InputError
 
-        saved = (state.get("locations"),
-                 state.get("point_locations", 64) if state.get("locations") == "point" else None,
-                 state.get("hidden"))
-        mine = self._shape()
-        if (saved[2] != mine[2]) if heads_only else (saved != mine):
-            def words(shape):
-                kind, points, hidden = shape
-                where = f"{points} points" if kind == "point" else repr(kind)
-                return f"locations {where}, hidden {hidden}"
-            raise InputError(f"{source}: a primitive agent with {words(saved)}, not "
-                             f"{words(mine)}")
+        # Checkpoints written before issue 52 name their locations; cloud points are retired.
+        if state.get("locations", "patch") != "patch":
+            raise InputError(f"{source}: a primitive agent of {state['locations']!r} locations, "
+                             f"which were retired (config/retired.py); only patch centres load")
+        if state.get("hidden") != self.hidden:
+            raise InputError(f"{source}: a primitive agent with hidden {state.get('hidden')}, "
+                             f"not hidden {self.hidden}")
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
 
 
 def agent_for(cfg, encoder) -> PrimitiveAgent:
     """The agent a PrimitiveTrainConfig describes (untrained heads) around `encoder`."""
-    return PrimitiveAgent(encoder, cfg.locations, cfg.hidden, cfg.primitive, cfg.point_locations)
+    return PrimitiveAgent(encoder, cfg.hidden, cfg.primitive)
 
 
 def load_primitive_run(run_dir, checkpoint: str = ""):
@@ -206,8 +188,6 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         from corn_drake.rl.primitive.outcome.model import MODEL_FILE
 
         parts = load_outcome_parts(run_dir / MODEL_FILE)
-        agent.outcome_chooser = OutcomeChooser(parts.models, parts.facts["tokens"], parts.facts,
-                                               parts.tilt)
-        agent.outcome_chooser.use(cfg.outcome)
+        agent.outcome_chooser = OutcomeChooser(parts.model, parts.facts["tokens"], parts.facts)
         agent.task = cfg.env.task
     return cfg, agent, int(state["global_step"])

@@ -3,7 +3,7 @@
 A PrimitiveCollector owns an env batch, a PrimitiveAgent (the frozen encoder and a copy of the
 actor and critic it chooses with) and the batch's current observation. collect() runs `rounds`
 rounds — one primitive in every env per round, chosen while exploring (uniformly at random
-during the run's first `random_steps` primitives, else rl/td3.select_primitives with the
+during the run's first `random_steps` primitives, else rl/primitive/td3.select_primitives with the
 temperature and motion noise) — and returns PrimitiveTransitions: per-location features of each
 state and of the state it led to (the encoder runs once per observation, here, so the learner
 never runs it), the choices, rewards and ends, and the finished episodes' stats. With a
@@ -99,8 +99,7 @@ class PrimitiveCollector:
             obs = self.envs.reset()
             self._features, self._candidates = self.agent.features(obs)
             if self.hindsight is not None:
-                for slot, state in enumerate(achieved_states(obs,
-                                                             self.hindsight.rule.points_key)):
+                for slot, state in enumerate(achieved_states(obs)):
                     self.hindsight.begin(slot, state)
 
     def _keep_for_hindsight(self, step, features, locations, motions, target,
@@ -108,12 +107,11 @@ class PrimitiveCollector:
         """Adds this round's transitions to their episodes; returns the relabelled columns of
         the episodes that ended (and begins the envs' new ones)."""
         episodes, relabeled = self.hindsight, []
-        points = episodes.rule.points_key
-        after = achieved_states(step.obs, points)
+        after = achieved_states(step.obs)
         ended = sorted(step.final_obs)
         finals = dict(zip(ended, achieved_states(
             {k: np.stack([step.final_obs[i][k] for i in ended]) for k in
-             ("object_position", "goal", "object_speed", points)}, points))) if ended else {}
+             ("object_position", "goal", "object_speed", "object_keypoints")}))) if ended else {}
         stats = dict(zip(ended, step.episode_stats))  # both in env order
         for slot in range(len(locations)):
             episodes.add(slot, {k: v[slot] for k, v in features.items()}, locations[slot],

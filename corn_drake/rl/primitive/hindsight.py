@@ -2,22 +2,20 @@
 2017): every finished episode is stored again with goals it did reach.
 
 Why: on push_turn the push policy's primitives turn objects all the time, but rarely to the
-episode's goal, so the turn is rewarded too seldom to be learned (docs/results/primitive/, items
+episode's goal, so the turn is rewarded too seldom to be learned (the primitive results log, items
 11 and 12: re-weighting the reward taught the policy not to push). Relabelled with a pose the
 object really reached, the same primitives become examples of turning to that pose.
 
 Each finished episode's transition t gets `goals` more copies, each with the goal set to where
 the object was after a later primitive j >= t (uniform over the episode's later states), with the
 reward and end PrimitiveEnv would have given for that goal:
-    progress_reward * (d(t) - d(t+1)) + turn_reward * (a(t) - a(t+1)) + success_reward * [success(t+1)]
+    progress_reward * (d(t) - d(t+1)) + success_reward * [success(t+1)]
 d: the mean distance between the object's bounding-box keypoints (height dropped) and the goal's
-(PrimitiveEnv.keypoint_distance), or between its cloud's points and theirs with reward_points
-"cloud" (PrimitiveEnv.cloud_distance: the teacher's cloud is fixed body points, so point i of
-two observations is one body point); a: the angle of the rotation between object and goal; success:
-the task's rule (planar xy within success_position and, where the task checks it, the rotation
-within success_orientation). A copy ends its episode (no bootstrap) when it succeeds under its
-goal or when the original transition ended the episode without success (left the workspace),
-and then also loses PrimitiveConfig.exit_penalty, as the env's transition did.
+(PrimitiveEnv.keypoint_distance); success: the task's rule (planar xy within success_position
+and, where the task checks it, the rotation within success_orientation). A copy ends its episode
+(no bootstrap) when it succeeds under its goal or when the original transition ended the episode
+without success (left the workspace). The pose where an episode left the workspace is one of
+the goals too (keeping it out measured no gain: config/retired.py's hindsight_exit_goals).
 
 Everything comes from the observations. The observation's goal rotation is G = R_goal R^T, and an
 episode's goal is fixed, so the rotation from state t to state j is R_j R_t^T = G_j^T G_t; the
@@ -25,10 +23,9 @@ positions and keypoints are the observation's own. The features' goal parts are 
 nn/primitive_features.with_goal (no encoder pass).
 
 Left out, on purpose: episodes that ended in a simulation error (their last observation is
-zeros); success is checked at the primitive's end only (the env checks every policy period); the
-tipping rule is not applied, so tip_penalty and hindsight goals do not go together
-(PrimitiveTrainConfig.check refuses both). With success_at_rest a relabelled success also needs
-the object still at the primitive's end (the observation's object_speed), as the env's does.
+zeros); success is checked at the primitive's end only (the env checks every policy period).
+With success_at_rest a relabelled success also needs the object still at the primitive's end
+(the observation's object_speed), as the env's does.
 """
 
 from __future__ import annotations
@@ -49,16 +46,10 @@ from corn_drake.transforms import from_pose9, rotation_angle
 class HindsightRule:
     goals: int  # relabelled copies per transition
     progress_reward: float
-    turn_reward: float
     success_reward: float
     success_position: float  # m, planar
     success_orientation: float  # rad
     check_orientation: bool
-    reward_points: str = "keypoints"  # PrimitiveConfig.reward_points
-    # Whether the pose an episode left the workspace at may be a relabelled goal
-    # (PrimitiveTrainConfig.hindsight_exit_goals).
-    exit_goals: bool = True
-    exit_penalty: float = 0.0  # PrimitiveConfig.exit_penalty
     # PrimitiveConfig.success_at_rest and its speeds: a relabelled success also needs the
     # object still at the primitive's end, as the env's own success then does.
     at_rest: bool = False
@@ -66,48 +57,36 @@ class HindsightRule:
     rest_angular_speed: float = REST_ANGULAR_SPEED
 
     @classmethod
-    def for_run(cls, goals: int, primitive, task, exit_goals: bool = True
-                ) -> HindsightRule | None:
+    def for_run(cls, goals: int, primitive, task) -> HindsightRule | None:
         """The rule of a run (PrimitiveConfig, TaskConfig); None when `goals` is 0 (off)."""
         if not goals:
             return None
-        return cls(int(goals), primitive.progress_reward, primitive.turn_reward,
-                   task.success_reward, task.success_position, task.success_orientation,
-                   task.check_orientation, primitive.reward_points, bool(exit_goals),
-                   primitive.exit_penalty, primitive.success_at_rest,
-                   primitive.rest_linear_speed, primitive.rest_angular_speed)
-
-    @property
-    def points_key(self) -> str:
-        """The observation key achieved_states reads the reward's points from."""
-        return POINTS_KEYS[self.reward_points]
-
-
-# The observation holding each PrimitiveConfig.reward_points choice's points (world frame).
-POINTS_KEYS = {"keypoints": "object_keypoints", "cloud": "cloud"}
+        return cls(int(goals), primitive.progress_reward, task.success_reward,
+                   task.success_position, task.success_orientation, task.check_orientation,
+                   primitive.success_at_rest, primitive.rest_linear_speed,
+                   primitive.rest_angular_speed)
 
 
 @dataclasses.dataclass(frozen=True)
 class Achieved:
     """Where one observation puts the object: its position, the goal rotation G = R_goal R^T,
-    and the reward's points (keypoints or cloud) with the height of its origin dropped (as
+    and the reward's box keypoints with the height of its origin dropped (as
     systems/reward.keypoints_at)."""
     position: np.ndarray  # (3,)
     goal_rotation: np.ndarray  # (3, 3)
-    points: np.ndarray  # (8, 3) box corners, or (N, 3) cloud points
+    points: np.ndarray  # (8, 3) box corners
     speed: np.ndarray | None = None  # (2,) linear m/s, angular rad/s; None: not observed
 
 
-def achieved_states(obs: dict[str, np.ndarray],
-                    points_key: str = "object_keypoints") -> list[Achieved]:
+def achieved_states(obs: dict[str, np.ndarray]) -> list[Achieved]:
     """One Achieved per row of a batch of primitive-env observations, its points from
-    `points_key` (HindsightRule.points_key), its speed from `object_speed` when given."""
+    `object_keypoints`, its speed from `object_speed` when given."""
     states = []
     speeds = obs.get("object_speed")
-    for i, (position, goal, body_points) in enumerate(zip(obs["object_position"], obs["goal"],
-                                                          obs[points_key])):
+    for i, (position, goal, keypoints) in enumerate(zip(obs["object_position"], obs["goal"],
+                                                        obs["object_keypoints"])):
         position = np.asarray(position, np.float64)
-        points = np.asarray(body_points, np.float64).reshape(-1, POSITION_DIM).copy()
+        points = np.asarray(keypoints, np.float64).reshape(-1, POSITION_DIM).copy()
         points[:, 2] -= position[2]
         speed = None if speeds is None else np.asarray(speeds[i], np.float64)
         states.append(Achieved(position, from_pose9(goal)[1], points, speed))
@@ -122,7 +101,7 @@ def relative_goal(state: Achieved, goal: Achieved) -> tuple[np.ndarray, np.ndarr
 
 def points_distance(state: Achieved, goal: Achieved) -> float:
     """Mean distance between the reward's points at `state` and at `goal` (PrimitiveEnv's
-    progress_distance)."""
+    keypoint_distance)."""
     return float(np.linalg.norm(state.points - goal.points, axis=1).mean())
 
 
@@ -147,8 +126,6 @@ def succeeded(rule: HindsightRule, state: Achieved, goal: Achieved) -> bool:
 def reward(rule: HindsightRule, before: Achieved, after: Achieved, goal: Achieved) -> float:
     """PrimitiveEnv's reward for the primitive from `before` to `after` had the goal been `goal`."""
     r = rule.progress_reward * (points_distance(before, goal) - points_distance(after, goal))
-    if rule.turn_reward:
-        r += rule.turn_reward * (rotation_to(before, goal) - rotation_to(after, goal))
     if succeeded(rule, after, goal):
         r += rule.success_reward
     return r
@@ -194,22 +171,15 @@ class HindsightEpisodes:
             return None
         states = [start] + [s.after for s in steps]  # state t+1 follows transition t
         # An episode that ended without success (and without a sim error) left the workspace:
-        # its last pose is no goal the task sets, and as one it would make the push that threw
-        # the object out a success (its copies all take that pose when it is the only later one).
+        # its last transition ends every copy, whatever the goal.
         exited = steps[-1].terminated and not succeeded_
-        last_goal = len(steps) - 1 if exited and not self.rule.exit_goals else len(steps)
         rows = []
         for t in range(len(steps)):
             ended_otherwise = exited and t == len(steps) - 1
-            if t + 1 > last_goal:
-                continue  # no later pose within the workspace to take as a goal
-            for j in rng.integers(t + 1, last_goal + 1, size=self.rule.goals):
+            for j in rng.integers(t + 1, len(steps) + 1, size=self.rule.goals):
                 goal = states[j]
                 done = succeeded(self.rule, states[t + 1], goal) or ended_otherwise
-                r = reward(self.rule, states[t], states[t + 1], goal)
-                if ended_otherwise:  # left the workspace, whatever the goal
-                    r -= self.rule.exit_penalty
-                rows.append((t, goal, r, done))
+                rows.append((t, goal, reward(self.rule, states[t], states[t + 1], goal), done))
         return self._columns(steps, states, rows) if rows else None
 
     @staticmethod

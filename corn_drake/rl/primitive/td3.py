@@ -27,7 +27,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 import torch
@@ -107,31 +107,35 @@ def select_primitives(scored: tuple[torch.Tensor, torch.Tensor], *, greedy: bool
 
 @dataclass
 class TD3Settings:
-    """Learner settings. The defaults are TD3's (Fujimoto et al. 2018) except the batch size and
-    the gradient clip.
+    """Learner settings. The numbers are a primitive run's (PrimitiveTrainConfig's fields of the
+    same names, the one place they are set, with why; `for_run`), all but the gradient clip.
+    They are TD3's (Fujimoto et al. 2018) except gamma (0.9 there, for episodes of at most
+    10 primitives) and the batch size.
 
-    How HACMan (Zhou et al. 2023) differs, where we know it: it also uses gamma 0.99, with short
+    How HACMan (Zhou et al. 2023) differs, where we know it: it uses gamma 0.99, with short
     episodes of 10 primitives (so the horizon, not gamma, bounds the return); it explores by
     sampling the location from a softmax over the per-point Q values with a temperature (our
     `TD3Learner.select(greedy=False, temperature=...)`) rather than epsilon-greedy. Its other
-    numbers (learning rates, noise, batch size) were not checked against its code here, so treat
-    these defaults as TD3's, not HACMan's.
+    numbers (learning rates, noise, batch size) were not checked against its code here.
     """
 
-    gamma: float = 0.99
-    tau: float = 0.005
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    policy_delay: int = 2
-    target_noise: float = 0.2
-    target_noise_clip: float = 0.5
-    batch_size: int = 64  # what the caller samples from the replay per update
+    gamma: float
+    tau: float
+    actor_lr: float
+    critic_lr: float
+    policy_delay: int
+    target_noise: float
+    target_noise_clip: float
+    batch_size: int  # what the caller samples from the replay per update
     # Max global gradient norm per network; a bootstrap target can spike early in training.
     grad_clip: float = 10.0
-    # Critic updates before the actor's first step (the targets still track): a run that starts
-    # from another task's actor and critic keeps that actor while the critic re-fits the new
-    # task's rewards, instead of following a critic still fitted to the old ones.
-    actor_warmup: int = 0
+
+    @classmethod
+    def for_run(cls, cfg, **changes) -> TD3Settings:
+        """The settings of a PrimitiveTrainConfig `cfg` (its fields of these names), with
+        `changes` on top."""
+        named = {f.name: getattr(cfg, f.name) for f in fields(cls) if hasattr(cfg, f.name)}
+        return cls(**{**named, **changes})
 
     def __post_init__(self) -> None:
         checks = {
@@ -144,7 +148,6 @@ class TD3Settings:
             "target_noise_clip": self.target_noise_clip >= 0,
             "batch_size": isinstance(self.batch_size, int) and self.batch_size >= 1,
             "grad_clip": self.grad_clip > 0,
-            "actor_warmup": isinstance(self.actor_warmup, int) and self.actor_warmup >= 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -155,9 +158,9 @@ class TD3Settings:
 class TD3Learner:
     """Owns the actor, twin critic, their targets and optimisers; `select` acts, `update` learns."""
 
-    def __init__(self, actor: nn.Module, critic: nn.Module, settings: TD3Settings | None = None,
+    def __init__(self, actor: nn.Module, critic: nn.Module, settings: TD3Settings,
                  device: str | torch.device = "cpu", seed: int = 0):
-        self.settings = settings if settings is not None else TD3Settings()
+        self.settings = settings
         if not isinstance(self.settings, TD3Settings):
             raise ValueError(f"settings: expected TD3Settings, got {type(settings).__name__}")
         self.device = torch.device(device)
@@ -272,8 +275,7 @@ class TD3Learner:
         self.updates += 1
 
         if self.updates % s.policy_delay == 0:
-            if self.updates > s.actor_warmup:
-                self._last_actor_loss = self._actor_step(features)
+            self._last_actor_loss = self._actor_step(features)
             self._soft_update(self.actor_target, self.actor)
             self._soft_update(self.critic_target, self.critic)
 

@@ -41,17 +41,10 @@ from corn_drake.rl.primitive.replay import ReplayBuffer
 from corn_drake.rl.run_progress import recent_mean, run_env_factory, to_cpu
 from corn_drake.rl.primitive.td3 import TD3Learner, TD3Settings
 from corn_drake.storage.atomic_files import write_json
-from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
+from corn_drake.storage.checkpoint_files import load_checkpoint, previous_checkpoint, save_checkpoint
 
 CHECKPOINT_KEYS = ("policy", "agent", "learner", "global_step", "episodes", "history",
                    "recent_episodes", "np_rng", "torch_rng", "replay_file")
-
-
-def td3_settings(cfg: PrimitiveTrainConfig) -> TD3Settings:
-    return TD3Settings(gamma=cfg.gamma, tau=cfg.tau, actor_lr=cfg.actor_lr,
-                       critic_lr=cfg.critic_lr, policy_delay=cfg.policy_delay,
-                       target_noise=cfg.target_noise, target_noise_clip=cfg.target_noise_clip,
-                       batch_size=cfg.batch_size, actor_warmup=cfg.actor_warmup)
 
 
 class PrimitiveTrainer:
@@ -60,7 +53,7 @@ class PrimitiveTrainer:
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.agent = agent_for(cfg, encoder)
-        self.learner = TD3Learner(self.agent.actor, self.agent.critic, td3_settings(cfg),
+        self.learner = TD3Learner(self.agent.actor, self.agent.critic, TD3Settings.for_run(cfg),
                                   device=training_device(cfg.device), seed=cfg.seed)
         self.replay = ReplayBuffer(cfg.replay_capacity)
         self.global_step, self.episodes, self.history = 0, 0, []
@@ -69,8 +62,7 @@ class PrimitiveTrainer:
         self._load()
         if self.global_step == 0 and cfg.init_from:
             self._start_from(cfg.init_from)
-        hindsight = HindsightRule.for_run(cfg.hindsight_goals, cfg.primitive, cfg.env.task,
-                                          cfg.hindsight_exit_goals)
+        hindsight = HindsightRule.for_run(cfg.hindsight_goals, cfg.primitive, cfg.env.task)
         n_envs = max(cfg.workers, 1) * cfg.envs_per_worker
         factory = run_env_factory(cfg.env, cfg.seed, cfg.workers, cfg.envs_per_worker,
                                   self.episodes // n_envs, cfg.primitive)
@@ -82,7 +74,7 @@ class PrimitiveTrainer:
             init_ray(cfg.ray_address or None)
             self.workers = RayPrimitiveCollectors(factory, cfg.workers, cfg.envs_per_worker,
                                                   self.agent, cfg.seed, self.global_step,
-                                                  hindsight, pin=cfg.pin_workers)
+                                                  hindsight)
         else:
             from corn_drake.rl.primitive.collection import PrimitiveCollector
             from corn_drake.rl.envs.vec_env import EnvBatch
@@ -103,14 +95,25 @@ class PrimitiveTrainer:
                  "episodes": self.episodes, "history": self.history,
                  "recent_episodes": self.recent_episodes, "np_rng": self.np_rng.bit_generator.state,
                  "torch_rng": torch.get_rng_state(), "replay_file": replay_file}
-        save_checkpoint(self.checkpoint_dir / "last.pt", state)
+        # Saved again at the same step (a run's last save after its periodic one): last.pt is
+        # rewritten in place, and prev.pt stays the step before with its own replay, so that a
+        # damaged newest replay still has an older consistent pair to resume from.
+        again = previous is not None and previous.get("global_step") == self.global_step
+        save_checkpoint(self.checkpoint_dir / "last.pt", state, keep_previous=not again)
+        if again:
+            previous = load_checkpoint(previous_checkpoint(self.checkpoint_dir / "last.pt"),
+                                       fallback=False)
         keep = {replay_file, (previous or {}).get("replay_file")}
         for path in self.checkpoint_dir.glob("replay_*.npz"):
             if path.name not in keep:
                 path.unlink(missing_ok=True)
 
     def _load(self) -> None:
-        state = load_checkpoint(self.checkpoint_dir / "last.pt", required=CHECKPOINT_KEYS)
+        # A replay write killed by SIGKILL leaves its temporary file (atomic_files.atomic_path):
+        # this run holds the folder's lock, so none of them is being written now.
+        for stale in self.checkpoint_dir.glob(".replay_*.npz.*.tmp"):
+            stale.unlink(missing_ok=True)
+        state = self._consistent_checkpoint()
         if state is None:
             return
         if state["policy"] != self.cfg.policy:
@@ -118,12 +121,39 @@ class PrimitiveTrainer:
                              f"policy, not {self.cfg.policy!r}")
         self.agent.load_network_state(state["agent"], self.checkpoint_dir / "last.pt")
         self.learner.load_state_dict(state["learner"])
-        self.replay = ReplayBuffer.load(self.checkpoint_dir / state["replay_file"],
-                                        self.cfg.replay_capacity)
+        self.replay = state.pop("_replay")
         self.global_step, self.episodes = state["global_step"], state["episodes"]
         self.history, self.recent_episodes = state["history"], state["recent_episodes"]
         self.np_rng.bit_generator.state = state["np_rng"]
         torch.set_rng_state(state["torch_rng"])
+
+    def _consistent_checkpoint(self) -> dict | None:
+        """The newest checkpoint whose replay file reads too, with that replay as `_replay`:
+        last.pt and its replay, else prev.pt and its (kept by _save for this), with a warning;
+        None for a new run. A truncated newest replay (a full disk, a copy cut short) thus
+        resumes from the pair before it, as an unreadable last.pt falls back to prev.pt."""
+        import sys
+
+        last = self.checkpoint_dir / "last.pt"
+        problems = []
+        for path, fallback in ((last, True), (previous_checkpoint(last), False)):
+            if not path.is_file() and path != last:
+                break
+            state = load_checkpoint(path, required=CHECKPOINT_KEYS, fallback=fallback)
+            if state is None:
+                return None
+            try:
+                state["_replay"] = ReplayBuffer.load(self.checkpoint_dir / state["replay_file"],
+                                                     self.cfg.replay_capacity)
+            except InputError as e:  # a missing or unreadable replay file
+                problems.append(str(e))
+                continue
+            if problems:
+                print(f"warning: {problems[0]}; resuming from the previous checkpoint {path} "
+                      f"(step {state['global_step']}) and its replay", file=sys.stderr)
+            return state
+        raise InputError(f"{self.checkpoint_dir}: no checkpoint with a readable replay file: "
+                         + "; ".join(problems))
 
     def _start_from(self, run: str) -> None:
         """A new run's actor and critic (and their targets) from another primitive run's
@@ -134,7 +164,7 @@ class PrimitiveTrainer:
         state = load_checkpoint(path, required=("agent",))
         if state is None:
             raise MissingInputError(f"--init-from {run}: no checkpoint ({path})")
-        self.agent.load_network_state(state["agent"], path, heads_only=True)
+        self.agent.load_network_state(state["agent"], path)
         self.learner.actor_target.load_state_dict(self.agent.actor.state_dict())
         self.learner.critic_target.load_state_dict(self.agent.critic.state_dict())
 

@@ -41,11 +41,10 @@ MAX_REPLACEMENTS = 3
 @ray.remote(num_cpus=1)
 class PrimitiveWorker:
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
-                 seed: list[int], hindsight: HindsightRule | None = None,
-                 pin_index: int | None = None):
-        from corn_drake.rl.workers.core_pinning import take_worker_core
+                 seed: list[int], hindsight: HindsightRule | None = None):
+        import torch
 
-        take_worker_core(pin_index)
+        torch.set_num_threads(1)  # its inference must not spread threads over the other workers
         self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent,
                                             hindsight=hindsight)
         self.rng = np.random.default_rng(seed)
@@ -64,16 +63,14 @@ class PrimitiveWorker:
 class RayPrimitiveCollectors:
     """`num_workers` PrimitiveWorkers of `envs_per_worker` envs each. `seed` and `start_step`
     seed the workers' random streams (a resumed run's workers draw new ones); `hindsight`: the
-    workers relabel their finished episodes (rl/primitive/hindsight.py); `pin`: worker w runs on core
-    w + 1 (rl/workers/core_pinning.py)."""
+    workers relabel their finished episodes (rl/primitive/hindsight.py)."""
 
     def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
-                 seed: int, start_step: int = 0, hindsight: HindsightRule | None = None,
-                 pin: bool = False):
+                 seed: int, start_step: int = 0, hindsight: HindsightRule | None = None):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
         self.factory, self.envs_per_worker, self.hindsight = factory, envs_per_worker, hindsight
-        self._seed, self._start_step, self.pin = int(seed), int(start_step), pin
+        self._seed, self._start_step = int(seed), int(start_step)
         # The networks' architecture and the encoder travel once, at spawn.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
         self._spawns = [0] * num_workers
@@ -89,7 +86,7 @@ class RayPrimitiveCollectors:
         # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
         return PrimitiveWorker.options(num_cpus=0).remote(
             self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent, seed,
-            self.hindsight, w if self.pin else None)
+            self.hindsight)
 
     def publish(self, agent, version: int) -> None:
         """Puts `agent`'s actor and critic (after update `version`) into the object store, once

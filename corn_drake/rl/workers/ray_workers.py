@@ -8,6 +8,7 @@ start new episodes, the step reports them as truncated with no bootstrap (final_
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import dataclasses
@@ -20,11 +21,10 @@ from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory, StepResult, concat_
 
 @ray.remote(num_cpus=1)
 class RolloutWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int,
-                 pin_index: int | None = None):
-        from corn_drake.rl.workers.core_pinning import take_worker_core
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int):
+        import torch
 
-        take_worker_core(pin_index)
+        torch.set_num_threads(1)  # its inference must not spread threads over the other workers
         self.batch = EnvBatch(factory, num_envs, first_index)
 
     def reset(self):
@@ -48,20 +48,70 @@ def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
     """
     if ray.is_initialized():
         return
-    # ray.init installs its own SIGINT/SIGTERM handlers (SIGTERM: a native stack dump and exit
-    # 134); the ones the command line set (cli.py: one line, exit 130 / 143) are put back.
-    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with _signals_held_during_start():
         if address:
             ray.init(address=address, log_to_driver=False)
             return
         before = _child_pids()
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+        with _ray_processes_in_their_own_session():
+            ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
         _start_reaper(sorted(_child_pids() - before))
+
+
+@contextlib.contextmanager
+def _ray_processes_in_their_own_session():
+    """Ray's processes (GCS, raylet and the workers the raylet starts) in a session of their
+    own, out of the command's process group.
+
+    A supervisor that signals the whole group (GNU timeout, SLURM, `kill -- -PGID`) would
+    otherwise reach the raylet and object store too; the command's core worker then loses its
+    objects and exits 1 before the command's own SIGTERM handler can say one line and end with
+    143. Out of the group, only the command hears the signal and shuts its Ray down in order;
+    if it dies instead, the reaper (ray_reaper.py) and Ray's own parent-death signal end them."""
+    import ray._private.services as services
+
+    popen = services.ConsolePopen
+
+    class OwnSession(popen):
+        def __init__(self, *args, **kwargs):
+            kwargs.setdefault("start_new_session", True)
+            super().__init__(*args, **kwargs)
+
+    services.ConsolePopen = OwnSession
+    try:
+        yield
     finally:
+        services.ConsolePopen = popen
+
+
+@contextlib.contextmanager
+def _signals_held_during_start():
+    """SIGINT / SIGTERM arriving while ray.init runs are held and delivered once it returns.
+
+    ray.init puts its own SIGTERM handler in (sys.exit from inside its start-up, which ends in
+    a native stack dump and exit 134) and replaces SIGINT's. While it runs, a signal is only
+    recorded, and Ray is kept from replacing the recorder; afterwards the handlers the command
+    line set (cli.py: one line, exit 130 / 143) are put back and a held signal is raised again,
+    so it ends the command as it would have a moment later."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers belong to the main thread (a notebook's worker thread: as is)
+        return
+    import ray._private.utils as ray_utils
+
+    held: list[int] = []
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in handlers:
+        signal.signal(sig, lambda signum, frame: held.append(signum))
+    set_sigterm_handler = ray_utils.set_sigterm_handler
+    ray_utils.set_sigterm_handler = lambda handler: None
+    try:
+        yield
+    finally:
+        ray_utils.set_sigterm_handler = set_sigterm_handler
         for sig, handler in handlers.items():
-            if callable(handler) and threading.current_thread() is threading.main_thread():
-                signal.signal(sig, handler)
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        if held:
+            signal.raise_signal(held[0])
 
 
 # The running reaper; holding it keeps our end of its stdin pipe open until this process dies.
@@ -90,19 +140,17 @@ def _start_reaper(pids: list[int]) -> None:
 
 
 class RayEnvBatch:
-    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int,
-                 pin: bool = False):
+    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
-        self.factory, self.envs_per_worker, self.pin = factory, envs_per_worker, pin
+        self.factory, self.envs_per_worker = factory, envs_per_worker
         self.workers = [self._spawn(w) for w in range(num_workers)]
         self.restarts = 0
 
     def _spawn(self, w: int):
         # num_cpus=0 on the actor handle: we may run more workers than cores (one-core machines).
         return RolloutWorker.options(num_cpus=0).remote(self.factory, self.envs_per_worker,
-                                                        w * self.envs_per_worker,
-                                                        w if self.pin else None)
+                                                        w * self.envs_per_worker)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker

@@ -33,11 +33,10 @@ MAX_REPLACEMENTS_PER_UPDATE = 3
 
 @ray.remote(num_cpus=1)
 class SegmentWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
-                 pin_index: int | None = None):
-        from corn_drake.rl.workers.core_pinning import take_worker_core
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent):
+        import torch
 
-        take_worker_core(pin_index)
+        torch.set_num_threads(1)  # its inference must not spread threads over the other workers
         self.collector = SegmentCollector(EnvBatch(factory, num_envs, first_index), agent, "cpu")
 
     def collect(self, state: dict, version: int, noise: np.ndarray) -> Segment:
@@ -55,14 +54,12 @@ class SegmentWorker:
 
 class RaySegmentCollectors:
     """`num_workers` SegmentWorkers of `envs_per_worker` envs each, looking like one
-    SegmentCollector over all their envs (worker 0's first); `pin`: worker w runs on core w + 1
-    (rl/workers/core_pinning.py)."""
+    SegmentCollector over all their envs (worker 0's first)."""
 
-    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent,
-                 pin: bool = False):
+    def __init__(self, factory: EnvFactory, num_workers: int, envs_per_worker: int, agent):
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
-        self.factory, self.envs_per_worker, self.pin = factory, envs_per_worker, pin
+        self.factory, self.envs_per_worker = factory, envs_per_worker
         # The agent's architecture travels once, at spawn; weights come with every update.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
         self.workers = [self._spawn(w) for w in range(num_workers)]
@@ -73,8 +70,7 @@ class RaySegmentCollectors:
     def _spawn(self, w: int):
         # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
         return SegmentWorker.options(num_cpus=0).remote(
-            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent,
-            w if self.pin else None)
+            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker

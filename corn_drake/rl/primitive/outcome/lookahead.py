@@ -5,9 +5,9 @@ A diagnostic, not a policy: it uses the simulator (the exact object, its mass an
 a model, which no deployed policy has. What it measures is how far the primitive set itself
 can take a task when each primitive is chosen as well as one primitive's outcome allows: if
 that is far above the learned policy, the learner is what holds the task back; if it is not,
-the primitives are (docs/results/primitive/README.md, item 33;
-docs/results/primitive/lookahead_oracle.py runs it on the evaluation episodes). It is also the
-teacher rl/primitive/outcome/lookahead_distill.py fits the policy to (item 34).
+the primitives are (the primitive results, item 33;
+experiments/primitive_outcomes/lookahead_oracle.py runs it on the evaluation episodes). It also
+labels the data an outcome model is fitted to (collect.py: every candidate's measured outcome).
 
 The candidates are the learned policy's own: for every location it may use, the motion its
 actor gives there, plus `random_motions` motions drawn uniformly from [-1, 1]^3 per location.

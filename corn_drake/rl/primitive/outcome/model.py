@@ -1,6 +1,6 @@
 """A model of what a contact primitive does to the object, and the reward it predicts.
 
-Why (docs/results/primitive/README.md, item 35): a critic must learn a primitive's reward for one
+Why (the primitive results log, item 35): a critic must learn a primitive's reward for one
 goal, but that reward is a known function of where the primitive leaves the object: the
 progress_reward times how much it closes the mean distance between the object's box keypoints
 and the goal's, plus the task's success reward. So this model predicts only the object's motion,
@@ -17,8 +17,9 @@ vertical), so a push and the same push turned about the vertical are one example
 input kind "box_contact" reads object-relative numbers instead (box_contact_features: the aim's
 height as a fraction of the box's, the box's proportions along and across the push...).
 
-The data are `lookahead_distill.py collect` folders whose states hold their outcomes
-(rl/lookahead_distill.collect_episode); outcome_model.pt files are rl/primitive/outcome/model_file.py's.
+The data are `corn-drake collect-outcomes` folders whose states hold their outcomes
+(rl/primitive/outcome/collect.collect_episode); `corn-drake fit-outcome` fits the model
+(outcome/fit.py); outcome_model.pt files are rl/primitive/outcome/model_file.py's.
 """
 
 from __future__ import annotations
@@ -73,8 +74,8 @@ def _turn(frames: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def box_contact_features(c: Candidates) -> torch.Tensor:
     """(R, 13 + physics) object-relative features of every candidate, so that what is learned
-    of a box's proportions carries to other objects (rl/primitive/outcome/tilt_classifier.py; an outcome model's
-    inputs with input_kind "box_contact"). In the push's frame: the aim point's height over the
+    of a box's proportions carries to other objects (an outcome model's inputs with input_kind
+    "box_contact"). In the push's frame: the aim point's height over the
     box's bottom as a fraction of the box's height; the box's height, length and width
     (decimetres); its height over its length; the aim point's offset from the box's centre
     along and across the push in half-lengths; the surface normal; the motion's horizontal

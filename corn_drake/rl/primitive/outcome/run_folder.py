@@ -1,6 +1,6 @@
 """A primitive run folder that chooses by an outcome model (config `chooser: outcome_model`):
-what `docs/results/primitive/outcome_model.py fit --out-run` writes, and `evaluate`, `ship`
-and `gallery` read like any primitive run (rl/primitive_agent.load_primitive_run).
+what `corn-drake fit-outcome --out-run` writes, and `evaluate`, `ship`
+and `gallery` read like any primitive run (rl/primitive/agent.load_primitive_run).
 
 It holds the proposing run's config (the task and settings it is evaluated under), its agent
 weights (the actor proposes one motion per location; the critic is unused) and the model.
@@ -30,12 +30,11 @@ def outcome_run_config(run: Path, task: str | None, sets: list[str]):
                                encoder=run_encoder_path(run, base.encoder))
 
 
-def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path,
-                      members=(), tilt=None) -> None:
+def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path) -> None:
     """`out`: a primitive run folder that chooses by `model`: `cfg`, the proposing run's agent
-    weights (checkpoints/last.pt) and the model (outcome_model.pt, with `members` and `tilt`
-    as rl/outcome_file.save_outcome_model takes them). Built beside `out` and renamed into
-    place, so `out` is whole or absent."""
+    weights (checkpoints/last.pt) and the model (outcome_model.pt, as
+    rl/primitive/outcome/model_file.save_outcome_model writes it). Built beside `out` and
+    renamed into place, so `out` is whole or absent."""
     import shutil
     import tempfile
 
@@ -60,7 +59,7 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
     try:
         (building / "checkpoints").mkdir()
         shutil.copyfile(used, building / "checkpoints" / "last.pt")
-        save_outcome_model(building / MODEL_FILE, model, tokens, members, tilt, **facts)
+        save_outcome_model(building / MODEL_FILE, model, tokens, **facts)
         write_run_config(cfg, building)
         building.rename(out)
     except BaseException:

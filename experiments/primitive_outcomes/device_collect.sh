@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
-# Item 38 (docs/results/primitive/README.md): on the lent 16-core machine, a larger procedural
-# training library (seed 1, the train split of an 800-object build, 64 drops per object: what
-# 210 s of 16 processes build, 190 objects there) and lookahead outcome data on it (16
-# processes of lookahead_distill.py collect with the shipped push_turn policy, at rest, settling
-# 10 periods, until 485 s: 181 episodes on 161 objects there); both come back packed in parts
-# under 15 MB. After ../../../shared/device/prepare.sh, from the project root, with the device
-# tool: carry .device/site_a.tar.xz, .device/site_small.tar.xz, .device/syslib,
-# .device/setup.sh, .device/cli.sh and this script, command
-# `bash docs/results/primitive/device_library_collect.sh`, timeout 590 s. Then here:
+# Outcome data on the lent 16-core machine (docs/results/primitive/README.md, item 38): a larger
+# procedural training library (seed 1, the train split of an 800-object build, 64 drops per
+# object: what 210 s of 16 processes build, 190 objects there) and lookahead outcome data on it
+# (16 processes of `corn-drake collect-outcomes` with the shipped push_turn policy, at rest,
+# settling 10 periods, until 485 s: 181 episodes on 161 objects there); both come back packed
+# in parts under 15 MB. This is how the shipped full6d_outcome's runs/big_collect was made.
+# After shared/device/prepare.sh, from the project root, with the device tool: carry
+# .device/site_a.tar.xz, .device/site_small.tar.xz, .device/syslib, .device/setup.sh,
+# .device/cli.sh and this script, command
+# `bash experiments/primitive_outcomes/device_collect.sh`, timeout 590 s. Then here:
 #   cat FILES_AT/lib.tar.xz.part* | xz -d | tar -C data -xf -      # data/library_big
 #   cat FILES_AT/col.tar.xz.part* | xz -d | tar -C runs -xf -      # runs/big_collect
 # Each process takes 3 x (objects / 16) episodes from its own start, so the first pass covers
-# every object once; episode k runs on object k mod N with seed 5000 + k.
+# every object once; episode k runs on object k mod N with seed 5000 + k. OBJ_S and COL_END
+# (seconds from the start) bound the two phases; a later call with other library seeds adds
+# objects.
 set -u
 T0=$(date +%s)
 el() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
@@ -30,9 +33,10 @@ N=$(python3 -c "from corn_drake.assets.library import list_objects; print(len(li
 PER=$(( (N + 15) / 16 )); left=$(( COL_END - ($(date +%s) - T0) ))
 el "train objects $N, $PER per process, $left s of collection"
 for p in $(seq 0 15); do
-  timeout -k 10 $left python3 docs/results/primitive/lookahead_distill.py collect \
-    models/weights/push_turn_primitive --objects $LIB --at-rest --episodes $((3*PER)) --start $((p*3*PER)) \
-    --chunk 1 --random-motions 1 --settle-steps 10 --out $COL > $COL/log_p$p.txt 2>&1 &
+  timeout -k 10 $left python3 -c 'import sys; from corn_drake.cli import main; sys.exit(main())' \
+    collect-outcomes models/weights/push_turn_primitive --objects $LIB --at-rest \
+    --episodes $((3*PER)) --start $((p*3*PER)) --chunk 1 --random-motions 1 --settle-steps 10 \
+    --out $COL > $COL/log_p$p.txt 2>&1 &
 done
 wait
 el "collected $(ls $COL/*.npz | wc -l) episodes"; tail -2 $COL/log_p0.txt

@@ -1,19 +1,20 @@
 """Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
-push policy, with hindsight goals (items 13-18 of README.md) and without (the table's rows); and
+push policy, with hindsight goals (items 13-18 of docs/results/primitive/README.md) and without (the table's rows); and
 variant_curves.png: the variants of the low-push hindsight run on push_turn (items 19-23, 27, 30).
 
-    .venv/bin/python docs/results/primitive/plot_hindsight_curves.py
+    .venv/bin/python -m experiments.primitive_policy.plot_hindsight_curves
 
-Reads this folder's train_history_<name>.json files (each {"run", "primitives", "history": rows
-of the trainer's metrics}); writes the figure next to them.
+Reads docs/results/primitive's train_history_<name>.json files (--results; each {"run",
+"primitives", "history": rows of the trainer's metrics}); writes the figures next to them.
 """
 
+import argparse
 import json
 from pathlib import Path
 
 from matplotlib.figure import Figure
 
-HERE = Path(__file__).resolve().parent
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results" / "primitive"
 RUNS = {  # label -> history file, drawn in this order (same colour per task, dashed: no hindsight)
     "push_turn": ("train_history_push_turn.json", "tab:orange", "--"),
     "push_turn + hindsight goals": ("train_history_push_turn_hindsight.json", "tab:orange", "-"),
@@ -47,11 +48,11 @@ VARIANTS = {  # item 15's run and what items 19-23, 27 and 30 changed in it, eac
 }
 
 
-def draw(runs: dict, out: str, until: int | None = None) -> None:
+def draw(results: Path, runs: dict, out: str, until: int | None = None) -> None:
     fig = Figure(figsize=(9, 3.2))
     success, q = fig.subplots(1, 2)
     for label, (name, colour, style) in runs.items():
-        rows = [r for r in json.loads((HERE / name).read_text())["history"]
+        rows = [r for r in json.loads((results / name).read_text())["history"]
                 if until is None or r["step"] <= until]
         steps = [r["step"] for r in rows]
         success.plot(steps, [r["success_rate"] for r in rows], style, color=colour, label=label)
@@ -62,12 +63,17 @@ def draw(runs: dict, out: str, until: int | None = None) -> None:
     q.set(xlabel="primitives", ylabel="critic mean Q at taken locations")
     success.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(HERE / out, dpi=100)
+    fig.savefig(results / out, dpi=100)
 
 
 def main() -> None:
-    draw(RUNS, "hindsight_curves.png")
-    draw(VARIANTS, "variant_curves.png", until=12000)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, default=RESULTS,
+                        help="the folder of the train_history files; the figures go there")
+    args = parser.parse_args()
+    draw(args.results, RUNS, "hindsight_curves.png")
+    draw(args.results, VARIANTS, "variant_curves.png", until=12000)
+    print(f"wrote {args.results / 'hindsight_curves.png'}, {args.results / 'variant_curves.png'}")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Can the primitives do the task at all? A one-step lookahead with the simulator as its model
 (corn_drake/rl/primitive/outcome/lookahead.py) against the learned policy's greedy choices, on the first
-episodes of `evaluate`'s unseen-object episodes: README.md's item 33.
+episodes of `evaluate`'s unseen-object episodes: docs/results/primitive/README.md's items 33, 40.
 
-    .venv/bin/python docs/results/primitive/lookahead_oracle.py models/weights/push_turn_primitive \
+    .venv/bin/python -m experiments.primitive_outcomes.lookahead_oracle \
+        models/weights/push_turn_primitive \
         --task push_turn --episodes 23 --random-motions 2 \
         --out docs/results/primitive/lookahead_push_turn.json
     (the same with --at-rest --out docs/results/primitive/lookahead_push_turn_at_rest.json)
@@ -17,6 +18,7 @@ With --at-rest a success counts only when a primitive has ended with the object 
 still (PrimitiveConfig.success_at_rest; the task's own rule counts a pose the object passes
 through mid-push), in both arms. Each finished episode is written to --out at once (atomically), and a rerun with the same
 arguments carries on after the episodes already there. Prints the summary at the end.
+`--set primitive.FIELD=VALUE` changes the executor in both arms (e.g. fewer primitives).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import numpy as np
 
 from corn_drake.assets.library import list_objects, load_object_spec
 from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.overrides import apply_sets
 from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import episode_seed
 from corn_drake.evaluation.failures import (failure_category, motion_summary,
@@ -99,6 +102,8 @@ def main() -> None:
     parser.add_argument("--at-rest", action="store_true",
                         help="success only at the end of a primitive with the object still "
                              "(PrimitiveConfig.success_at_rest), in both arms")
+    parser.add_argument("--set", action="append", default=[], dest="set", metavar="KEY=VALUE",
+                        help="primitive.* settings of the executor, in both arms")
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
     if args.episodes < 1:
@@ -113,9 +118,14 @@ def main() -> None:
     if not ids:
         raise InputError(f"no unseen objects in library {args.objects}")
     primitive = dataclasses.replace(agent.primitive_config, success_at_rest=args.at_rest)
+    if args.set:
+        primitive = apply_sets(dataclasses.replace(base, primitive=primitive), args.set,
+                               only="primitive").primitive
     settings = {"run": args.run, "task": cfg.task.name, "objects": args.objects,
                 "random_motions": args.random_motions, "primitives_trained": trained,
                 "success_at_rest": args.at_rest}
+    if args.set:  # only then, so that the reports written before --set still resume
+        settings["set"] = args.set
     rows = []
     if args.out.exists():
         done = json.loads(args.out.read_text())

@@ -1,42 +1,41 @@
-"""Which inputs carry an outcome model to objects it never saw? README.md's item 40.
+"""Which inputs carry an outcome model to objects it never saw? docs/results/primitive/README.md's item 40.
 
-    .venv/bin/python docs/results/primitive/outcome_inputs.py \
+    .venv/bin/python -m experiments.primitive_outcomes.outcome_inputs \
         models/weights/push_turn_primitive --data runs/big_collect --holdout-objects 30 \
         --out docs/results/primitive/outcome_inputs_big_collect.json
     (the same with --data runs/big_collect runs/sources_all --holdout-objects 40
      --out docs/results/primitive/outcome_inputs.json)
 
 Per split, `--holdout-objects` objects are held out whole and the outcome model
-(rl/outcome_model.fit_network, `--updates` updates, seed = split) is fitted on the others' rows
+(rl/primitive/outcome/model.fit_network, `--updates` updates, seed = split) is fitted on the others' rows
 with each kind of input:
   raw           model_inputs' own numbers: the aim, normal, motion and 8 box keypoints in the
                 push's frame, and the physics (what every shipped outcome model reads);
-  raw_and_box   those and rl/outcome_model.box_contact_features together;
+  raw_and_box   those and rl/primitive/outcome/model.box_contact_features together;
   box_contact   box_contact_features alone (object-relative: the aim's height as a fraction of
                 the box's, the box's proportions along and across the push, ...).
 On the held-out states: the mean keypoint error against "the object does not move"'s, and the
 choice among each state's candidates in the rewards the simulator measured
-(lookahead_distill.scores_quality's `chosen`, per primitive; the lookahead's own `best`).
+(held_out.scores_quality's `chosen`, per primitive; the lookahead's own `best`).
+The data are `corn-drake collect-outcomes` folders, object ids tagged by the folder's position.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from distill_scaling import held_out_objects, select_states  # noqa: E402
-from outcome_ensemble import load_study  # noqa: E402
-from physics_priors import held_out_prediction  # noqa: E402
-
-from corn_drake.rl.primitive.outcome.lookahead_distill import scores_quality  # noqa: E402
-from corn_drake.rl.primitive.outcome.model import (SCALE, box_contact_features, data_after,  # noqa: E402
-                                         data_candidates, model_inputs, predicted_rewards)
-from corn_drake.storage.atomic_files import write_json  # noqa: E402
+from corn_drake.rl.primitive.agent import load_primitive_run
+from corn_drake.rl.primitive.outcome.data import load_outcome_data, select_states
+from corn_drake.rl.primitive.outcome.model import (SCALE, box_contact_features, data_after,
+                                                   data_candidates, model_inputs,
+                                                   predicted_rewards)
+from corn_drake.storage.atomic_files import write_json
+from experiments.primitive_outcomes.held_out import (held_out_objects, held_out_prediction,
+                                                     scores_quality)
 
 
 def main() -> None:
@@ -49,7 +48,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    base, data, objects = load_study(args.run, args.data, args.holdout_objects)
+    base, _, _ = load_primitive_run(args.run)
+    data = load_outcome_data(args.data)
+    objects = sorted(set(data["object"]))
+    if args.holdout_objects >= len(objects):
+        raise SystemExit(f"--holdout-objects {args.holdout_objects}: the data have only "
+                         f"{len(objects)} objects")
     task, progress = base.env.task, base.primitive.progress_reward
     c = data_candidates(data)
     state = data["state"]

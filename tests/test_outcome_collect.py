@@ -1,6 +1,6 @@
-"""Distilling the one-step lookahead: the collected states hold every candidate's reward from the
-same state, an episode that follows the policy is the policy's own episode, the critic fitted to
-the rewards predicts them better than before, and the actor's fit raises the critic's value."""
+"""Collecting lookahead data (rl/primitive/outcome/collect.py): the collected states hold every
+candidate's reward and outcome from the same state, and an episode that follows the policy is
+the policy's own episode."""
 
 from __future__ import annotations
 
@@ -11,8 +11,7 @@ import torch
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
-from corn_drake.rl.primitive.outcome.lookahead_distill import (choice_quality, collect_episode, critic_error,
-                                             fit_actor, fit_critic, scores_quality, stack_states)
+from corn_drake.rl.primitive.outcome.collect import collect_episode, stack_states
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
 
@@ -21,7 +20,7 @@ def _agent():
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(0)
-    return PrimitiveAgent(make_policy_encoder("corn"), "patch").eval()
+    return PrimitiveAgent(make_policy_encoder("corn")).eval()
 
 
 def _env(max_primitives: int = 2) -> PrimitiveEnv:
@@ -81,16 +80,6 @@ def test_each_candidates_outcome_gives_back_its_reward(collected):
     assert data["outcome_physics"].shape == (2, 5) and data["still_after"].dtype == bool
 
 
-def test_scores_quality_takes_each_states_highest_scored_candidate():
-    data = {"state": np.array([0, 0, 0, 1, 1]),
-            "reward": np.array([0.1, 0.5, -0.2, 0.0, 0.3])}
-    figures = scores_quality(np.array([3.0, 1.0, 2.0, -1.0, 5.0]), data)
-    assert figures["chosen"] == pytest.approx((0.1 + 0.3) / 2)
-    assert figures["best"] == pytest.approx((0.5 + 0.3) / 2)
-    assert figures["first"] == pytest.approx((0.1 + 0.0) / 2)
-    assert figures["mean"] == pytest.approx((0.4 / 3 + 0.15) / 2)
-
-
 def test_following_the_policy_plays_the_policys_own_episode():
     agent, env = _agent(), _env()
     collect_episode(env, agent, 3, 1, 1.0, np.random.default_rng(0))
@@ -106,35 +95,8 @@ def test_following_the_policy_plays_the_policys_own_episode():
     np.testing.assert_array_equal(followed, own.object_pose())
 
 
-def test_the_fitted_critic_predicts_the_rewards_and_the_actor_follows_it(collected):
-    agent, states, _ = collected
-    data = stack_states(states)
-    assert data["features_tokens"].shape[0] == 2 and data["state"].max() == 1
-    before = critic_error(agent, data)
-    losses = fit_critic(agent, data, epochs=60, batch_size=16, validation=data)
-    after = critic_error(agent, data)
-    assert after < 0.25 * before and losses["train"][-1] < losses["train"][0]
-    assert losses["validation"][-1] == pytest.approx(after)
-    actor_losses = fit_actor(agent, data, epochs=30, batch_size=2)
-    assert actor_losses[-1] < actor_losses[0]  # -Q1 fell: the actor moved toward the critic's best
-    assert all(p.requires_grad for p in agent.critic.parameters())
-
-
-def test_the_rank_fit_orders_each_states_candidates(collected):
-    agent, states, _ = collected
-    data = stack_states(states)
-    losses = fit_critic(agent, data, epochs=60, batch_size=64, loss="rank")
-    assert losses["train"][-1] < 0.8 * losses["train"][0]
-    # On its own data it chooses (nearly) the best candidate: within a tenth of the gap between
-    # the best and a random one (two candidates may earn almost the same).
-    quality = choice_quality(agent, data)
-    assert quality["best"] - quality["chosen"] <= 0.1 * (quality["best"] - quality["mean"])
-
-
 def test_bad_input_is_refused_by_name():
     with pytest.raises(InputError, match="no lookahead states"):
         stack_states([])
-    with pytest.raises(InputError, match="loss"):
-        fit_critic(_agent(), {"state": np.zeros(1, np.int64)}, 1, loss="hinge")
     with pytest.raises(InputError, match="follow_policy"):
         collect_episode(_env(), _agent(), 3, 1, 1.5, np.random.default_rng(0))

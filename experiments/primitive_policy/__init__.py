@@ -1,0 +1,1 @@
+"""Studies of the contact-primitive policy's training (README.md)."""
