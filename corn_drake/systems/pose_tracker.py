@@ -24,7 +24,7 @@ import dataclasses
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RotationMatrix
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import EventStatus, LeafSystem
 
@@ -219,6 +219,3 @@ def pose_error(X_est: np.ndarray, X_true: np.ndarray) -> tuple[float, float]:
     return (float(np.linalg.norm(X_est[:3, 3] - X_true[:3, 3])),
             float(np.rad2deg(rotation_angle(X_est[:3, :3] @ X_true[:3, :3].T))))
 
-
-def rigid_transform_to_matrix(X: RigidTransform) -> np.ndarray:
-    return X.GetAsMatrix4()
