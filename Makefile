@@ -1,16 +1,17 @@
 # Two commands set everything up on a fresh machine: `make test` and `make demo`.
 # `install` is idempotent: it re-runs pip only when pyproject.toml or setup.py changes.
 SHELL := /bin/bash
-# Python 3.11 where it runs: pip installs the 192 MB CPU torch wheel for it here. 3.12 is the
-# fallback (Ubuntu 24.04's python3) and `make test-py312` checks it: there pip takes torch from
-# PyPI, the CUDA build, ~2.7 GB of wheels and a 6.6 GB venv (measured). A pyenv shim exists for
-# every installed version but fails for one not selected, so each is asked to run.
-PYTHON ?= $(shell for p in python3.11 python3.12; do $$p -c '' >/dev/null 2>&1 && { echo $$p; break; }; done)
+# Python 3.11 where it runs: pip installs the 192 MB CPU torch wheel for it here. 3.12 (Ubuntu
+# 24.04's python3) and 3.13 are the fallbacks, in that order; `make test-py312` and `make
+# test-py313` check them: there pip takes torch from PyPI, the CUDA build, ~2.7 GB of wheels and
+# a 6.6 GB venv (measured on 3.12). A pyenv shim exists for every installed version but fails
+# for one not selected, so each is asked to run. docs/install.md: what runs where.
+PYTHON ?= $(shell for p in python3.11 python3.12 python3.13; do $$p -c '' >/dev/null 2>&1 && { echo $$p; break; }; done)
 VENV := .venv
 STAMP := $(VENV)/.installed
 BIN := $(VENV)/bin
 
-.PHONY: install test test-fast test-py312 demo bench system-deps clean
+.PHONY: install test test-fast notebooks demo bench system-deps clean
 
 install: system-deps $(STAMP)
 
@@ -28,8 +29,8 @@ system-deps:
 	fi
 
 $(STAMP): pyproject.toml setup.py
-	@test -x $(BIN)/python || test -n "$(PYTHON)" || { echo "no python3.11 or python3.12 runs \
-	here; name one: make PYTHON=/path/to/python3.12" >&2; exit 1; }
+	@test -x $(BIN)/python || test -n "$(PYTHON)" || { echo "no python3.11, python3.12 or \
+	python3.13 runs here; name one: make PYTHON=/path/to/python3.13" >&2; exit 1; }
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	# CPU torch first, so that no dependency resolution can reach for a CUDA build.
@@ -46,22 +47,27 @@ test: install
 test-fast: install
 	$(BIN)/python -m pytest -q -m "not slow"
 
-# The other supported Python beside the default venv: .venv312 made by python3.12 (pyenv's
-# 3.12.1 where pyenv is used; PYTHON312=... names another), installed as `install` does, then
-# the fast tests. Slow the first time: torch for 3.12 is the CUDA build (see PYTHON above).
+# The other supported Pythons beside the default venv: `make test-py312` / `make test-py313`
+# make .venv312 / .venv313 with pyenv's 3.12.1 / 3.13.0 (PYTHON312=... / PYTHON313=... name
+# others), install as `install` does, then run the fast tests. Slow the first time: torch for
+# 3.12 and 3.13 is the CUDA build from PyPI (see PYTHON above).
 PYTHON312 ?= env PYENV_VERSION=3.12.1 python3.12
-VENV312 := .venv312
-STAMP312 := $(VENV312)/.installed
+PYTHON313 ?= env PYENV_VERSION=3.13.0 python3.13
 
-$(STAMP312): pyproject.toml setup.py
-	@test -x $(VENV312)/bin/python || $(PYTHON312) -m venv $(VENV312)
-	$(VENV312)/bin/pip install -q --upgrade pip
-	$(VENV312)/bin/pip install -q torch==2.13.0
-	$(VENV312)/bin/pip install -q -e '.[dev]'
-	touch $(STAMP312)
+.PRECIOUS: .venv%/.installed  # the stamp of a finished install: make must not delete it
+.venv%/.installed: pyproject.toml setup.py
+	@test -x .venv$*/bin/python || $(PYTHON$*) -m venv .venv$*
+	.venv$*/bin/pip install -q --upgrade pip
+	.venv$*/bin/pip install -q torch==2.13.0
+	.venv$*/bin/pip install -q -e '.[dev]'
+	touch $@
 
-test-py312: system-deps $(STAMP312)
-	$(VENV312)/bin/python -m pytest -q -m "not slow"
+test-py%: system-deps .venv%/.installed
+	.venv$*/bin/python -m pytest -q -m "not slow"
+
+# JupyterLab on notebooks/ (the dev extras install it); the tests run them headless instead.
+notebooks: install
+	$(BIN)/jupyter lab notebooks/
 
 demo: install
 	$(BIN)/corn-drake demo
@@ -71,4 +77,4 @@ bench: install
 	$(BIN)/corn-drake bench sim --report reports/bench_sim.json
 
 clean:
-	rm -rf $(VENV) $(VENV312) build *.egg-info
+	rm -rf $(VENV) .venv312 .venv313 build *.egg-info

@@ -8,13 +8,15 @@ commands never edits the same lines.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import pkgutil
+import re
 import signal
 import sys
 
-from corn_drake import commands
+from corn_drake import __version__, commands
 from corn_drake.arguments.help_format import DefaultsHelpFormatter
 from corn_drake.errors import InputError, is_disk_full
 
@@ -40,11 +42,69 @@ class OneLineParser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: error: {message}{_choice_hint(message)} "
+                     f"(see {self.prog} --help)\n")
+
+
+def _closest(word: str, candidates) -> str | None:
+    """The candidate `word` most likely misspells (difflib), or None."""
+    found = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def _choice_hint(message: str) -> str:
+    """'; did you mean X?' for argparse's "invalid choice: 'x' (choose from 'a', 'b')" (a
+    mistyped command, policy or split), else ''."""
+    m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+    if not m:
+        return ""
+    guess = _closest(m.group(1), re.findall(r"'([^']*)'", m.group(2)))
+    return f"; did you mean {guess}?" if guess else ""
+
+
+def _innermost(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The (sub)parser that parsed the last chosen command word: `corn-drake train` or
+    `corn-drake bench sim`."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            chosen = action.choices.get(getattr(args, action.dest, None) or "")
+            if chosen is not None:
+                return _innermost(chosen, args)
+    return parser
+
+
+def _flag_hint(parser: argparse.ArgumentParser, unknown: list[str]) -> str:
+    """'; did you mean --steps?' for the first unknown argument that looks like a flag and is
+    close to one `parser` shows in its --help (renamed, hidden spellings left out)."""
+    flags = [s for a in parser._actions if a.help != argparse.SUPPRESS
+             for s in a.option_strings if s.startswith("--")]
+    for word in unknown:
+        if word.startswith("--"):
+            guess = _closest(word.split("=", 1)[0], flags)
+            if guess:
+                return f"; did you mean {guess}?"
+    return ""
+
+
+def version_line() -> str:
+    """`corn-drake --version`: the package's version, the Python running it and the versions of
+    drake and torch installed for that Python (read from their metadata, nothing imported)."""
+    from importlib import metadata
+
+    def installed(dist: str) -> str:
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            return "not installed"
+
+    return (f"corn-drake {__version__} (Python {sys.version.split()[0]}, drake "
+            f"{installed('drake')}, torch {installed('torch')})")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="corn-drake", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=version_line(),
+                        help="print the version (and this Python's drake and torch) and exit")
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an input error (or set CORN_DRAKE_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -64,8 +124,66 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
+# The imports a command needs that a Python without the project installed lacks: found (not
+# imported) before a command runs, so such a Python prints one line instead of a traceback.
+HEAVY_MODULES = ("pydrake", "torch")
+# The distributions behind the modules a dependency-less Python fails to import (top-level name).
+DEPENDENCY_MODULES = {"pydrake", "torch", "numpy", "scipy", "open3d", "trimesh", "manifold3d",
+                      "coacd", "gymnasium", "ray", "psutil", "tensorboard", "tqdm", "matplotlib",
+                      "yaml"}
+
+
+def missing_dependency_line(module: str) -> str:
+    """One line for a Python that lacks `module` (a dependency): which Python, and how to run
+    the CLI with the project's environment instead."""
+    from pathlib import Path
+
+    venv = Path(__file__).resolve().parents[1] / ".venv" / "bin"
+    how = (f"activate the project's venv (source {venv}/activate) or run {venv}/corn-drake"
+           if (venv / "python").exists() else
+           "install the project into this Python (pip install corn-drake, or `make install` / "
+           "pip install -e . in its checkout) or activate the environment it is installed in")
+    return (f"corn-drake: error: this Python ({sys.executable}) has no {module!r} module, which "
+            f"corn-drake needs: {how}")
+
+
+def _check_dependencies() -> str | None:
+    """The first of HEAVY_MODULES this Python cannot import, or None."""
+    import importlib.util
+
+    for name in HEAVY_MODULES:
+        try:
+            if importlib.util.find_spec(name) is None:
+                return name
+        except (ImportError, ValueError):
+            return name
+    return None
+
+
+def parse(argv: list[str] | None = None):
+    """The parsed arguments; an unknown argument is refused by the (sub)command's parser, naming
+    the closest flag that command has ("did you mean")."""
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        inner = _innermost(parser, args)
+        inner.error(f"unrecognized arguments: {' '.join(unknown)}"
+                    f"{_flag_hint(inner, unknown) or _flag_hint(parser, unknown)}")
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = parse(argv)
+    except ModuleNotFoundError as e:  # a command module's import, in a Python without the deps
+        if (e.name or "").split(".")[0] not in DEPENDENCY_MODULES:
+            raise
+        print(missing_dependency_line(e.name), file=sys.stderr)
+        return 1
+    missing = _check_dependencies()
+    if missing is not None:
+        print(missing_dependency_line(missing), file=sys.stderr)
+        return 1
     debug = args.debug or os.environ.get("CORN_DRAKE_DEBUG", "") not in ("", "0")
     interrupted: list[int] = []
 
@@ -84,6 +202,11 @@ def main(argv: list[str] | None = None) -> int:
         # One line, like argparse's own errors: the user's input is wrong, not the program.
         print(f"{args._prog}: error: {e}", file=sys.stderr)
         return 2
+    except ModuleNotFoundError as e:
+        if debug or (e.name or "").split(".")[0] not in DEPENDENCY_MODULES:
+            raise
+        print(missing_dependency_line(e.name), file=sys.stderr)
+        return 1
     except (Interrupted, KeyboardInterrupt, Exception) as e:
         # An interrupt, or what it caused on the way out (a Ray worker that got the same
         # SIGINT dies and ray.get raises): one line and 128 + the signal, as a shell reports it.

@@ -52,12 +52,12 @@ ROWS = [
     _row("", "COMMAND"),
     _row("nosuch", "nosuch"),
     # objects (issue 18 items 6, 9, 12)
-    _row(f"objects --num 0 {OUT}", "--num"),
-    _row(f"objects --num -3 {OUT}", "--num"),
-    _row(f"objects --num many {OUT}", "--num"),
+    _row(f"objects --num-objects 0 {OUT}", "--num-objects"),
+    _row(f"objects --num-objects -3 {OUT}", "--num-objects"),
+    _row(f"objects --num-objects many {OUT}", "--num-objects"),
     _row(f"objects --drops 0 {OUT}", "--drops"),
     _row(f"objects --seed -1 {OUT}", "--seed"),
-    _row("objects --num 2", "--out"),
+    _row("objects --num-objects 2", "--out"),
     _row("objects --source {root}/empty_meshes --out {root}/new_lib", "{root}/empty_meshes"),
     _row("objects --source {root}/nowhere --out {root}/new_lib", "{root}/nowhere"),
     # contact-data (items 4, 12, 15)
@@ -163,6 +163,8 @@ ROWS = [
          "{root}/nowhere.yaml"),
     _row(f"bench sim {BENCH_REPORT} --baseline-physics {{root}}/bad_type.yaml",
          "{root}/bad_type.yaml"),
+    _row(f"bench learner {BENCH_REPORT} --batches 0,64", "--batches"),
+    _row(f"bench learner {BENCH_REPORT} --policy nosuch", "--policy"),
     _row(f"bench train {BENCH_REPORT} --envs-per-worker 0", "--envs-per-worker"),
     _row(f"bench train {BENCH_REPORT} --updates 0", "--updates"),
     _row(f"bench train {BENCH_REPORT} --warmup-updates -1", "--warmup-updates"),
@@ -206,7 +208,7 @@ ROWS = [
     _row(f"bench student {BENCH_REPORT} --config {{root}}/bad_type.yaml", "{root}/bad_type.yaml"),
     # demo
     _row("demo --out {root}/demo --num-objects 0", "--num-objects"),
-    _row("demo --out {root}/demo --contact-samples 0", "--contact-samples"),
+    _row("demo --out {root}/demo --num-samples 0", "--num-samples"),
     _row("demo --out {root}/demo --pretrain-steps 0", "--pretrain-steps"),
     _row("demo --out {root}/demo --train-steps -1", "--train-steps"),
     _row("demo --out {root}/demo --eval-episodes 0", "--eval-episodes"),
@@ -230,21 +232,43 @@ ROWS += [
          "--seed"),
     _row(f"fit-outcome {PROPOSER} --data {{root}}/lib --out-run {{root}}/out", "{root}/out"),
 ]
+# A planner evaluation's split parts merged (issue 54).
+ROWS += [
+    _row("merge-reports {root}/nosuch.rows.jsonl --report {root}/out/m.json", "nosuch.rows.jsonl"),
+    _row("merge-reports {root}/out/report.json --report {root}/out/m.json", "not a planner rows file"),
+    _row("merge-reports {root}/lib/manifest.json", "--report"),
+]
 ROWS += [_row(f"train --device gpu {OUT}", "--device: device must be cpu, cpu:N, cuda or cuda:N, got 'gpu'")]
 
 ROWS += [_row(f"train --task {{root}}/{name} {OUT}", "{root}/" + name, detail)
          for name, (_, detail) in BROKEN_CONFIGS.items()]
 
 # distill (issue 15): the teacher run must exist and be a trained teacher run.
-ROWS += [_row(f"distill {OUT}", "--teacher"),
-         _row(f"distill --teacher {{root}}/nosuch {OUT}", "--teacher {root}/nosuch"),
-         _row(f"distill --teacher {{root}}/run_no_history {OUT}",
-              "--teacher {root}/run_no_history", "not a trained teacher run"),
-         _row(f"distill --teacher {{root}}/nosuch --steps 0 {OUT}", "--steps"),
-         _row(f"distill --teacher {{root}}/nosuch --perception magic {OUT}", "--perception")]
+ROWS += [_row(f"distill {OUT}", "--run"),
+         _row(f"distill --run {{root}}/nosuch {OUT}", "--run {root}/nosuch"),
+         _row(f"distill --run {{root}}/run_no_history {OUT}",
+              "--run {root}/run_no_history", "not a trained teacher run"),
+         _row(f"distill --run {{root}}/nosuch --steps 0 {OUT}", "--steps"),
+         _row(f"distill --run {{root}}/nosuch --perception magic {OUT}", "--perception"),
+         _row(f"distill --run {{root}}/nosuch --torch-threads 0 {OUT}", "--torch-threads")]
+
+# Issue 55: one spelling per concept; the old one is refused, naming the new one.
+ROWS += [_row(f"objects --num 2 {OUT}", "--num is now --num-objects"),
+         _row("demo --out {root}/demo --contact-samples 5", "--contact-samples is now --num-samples"),
+         _row(f"distill --teacher {{root}}/nosuch {OUT}", "--teacher is now --run"),
+         # a mistyped flag, command, choice or --set key: the closest one is named
+         _row(f"train --stpes 5 {OUT}", "--stpes", "did you mean --steps?"),
+         _row(f"objects --num-object 2 --drosp 3 {OUT}", "--drosp", "did you mean --drops?"),
+         _row("trian", "'trian'", "did you mean train?"),
+         _row(f"train --policy cron {OUT}", "did you mean corn?"),
+         _row(f"bench sim {BENCH_REPORT} --repets 2", "did you mean --repeats?"),
+         _row(f"train --set ppo.lrr=1 {OUT}", "did you mean 'ppo.lr'?"),
+         _row(f"train --set task.episode_stepz=3 {OUT}", "did you mean 'task.episode_steps'?"),
+         _row(f"evaluate --run scripted --set task.goal_xx=[0,1] {REPORT}",
+              "did you mean 'task.goal_x'?")]
 
 # Item 12: every command that reads an object library names the broken manifest.
-LIBRARY_READERS = ["objects --num 1 --out LIB", f"contact-data --objects LIB --num-samples 8 {OUT}",
+LIBRARY_READERS = ["objects --num-objects 1 --out LIB", f"contact-data --objects LIB --num-samples 8 {OUT}",
                    f"train --objects LIB {OUT}", f"evaluate --run scripted --objects LIB {REPORT}"]
 ROWS += [_row(argv.replace("LIB", "{root}/" + lib), "{root}/" + lib + "/manifest.json")
          for argv in LIBRARY_READERS for lib in BROKEN_MANIFESTS]

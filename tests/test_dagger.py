@@ -103,13 +103,13 @@ def test_beta_anneals_linearly_to_zero():
 
 def test_distill_refuses_a_missing_teacher_naming_the_flag(tmp_path, capsys):
     out = tmp_path / "student"
-    assert cli(["distill", "--teacher", str(tmp_path / "nope"), "--out", str(out),
+    assert cli(["distill", "--run", str(tmp_path / "nope"), "--out", str(out),
                 "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--teacher" in err[0] and "nope" in err[0]
+    assert len(err) == 1 and "--run" in err[0] and "nope" in err[0]
     assert not out.exists()
     assert cli(["distill", "--out", str(out)]) == 2  # a new run needs a teacher
-    assert "--teacher is required" in capsys.readouterr().err
+    assert "--run is required" in capsys.readouterr().err
 
 
 # --- slow: a real teacher run and student envs --------------------------------------------------
@@ -128,7 +128,7 @@ def teacher_run(tmp_path_factory):
 
 
 def _distill(teacher, encoder, out, steps, *extra):
-    return cli(["distill", "--teacher", str(teacher), "--encoder", str(encoder),
+    return cli(["distill", "--run", str(teacher), "--encoder", str(encoder),
                 "--allow-weak-encoder", "--perception", "ground_truth", "--steps", str(steps),
                 "--envs-per-worker", "2", "--window", "4", "--beta-start", "0.5",
                 "--beta-anneal-steps", "64", "--log-every", "1", "--out", str(out), "--no-progress", *extra])
@@ -206,7 +206,7 @@ def test_distill_refuses_a_student_run_as_teacher_and_a_teacher_without_encoder(
         teacher_run, tmp_path, capsys):
     teacher, encoder = teacher_run
     # A state teacher records no encoder: the student's must be given.
-    assert cli(["distill", "--teacher", str(teacher), "--out", str(tmp_path / "s"),
+    assert cli(["distill", "--run", str(teacher), "--out", str(tmp_path / "s"),
                 "--no-progress"]) == 2
     assert "--encoder" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
@@ -216,7 +216,7 @@ def test_distill_refuses_a_student_run_as_teacher_and_a_teacher_without_encoder(
     from corn_drake.run_folders.config_file import write_run_config
 
     write_run_config(DistillConfig(teacher=str(teacher)), fake)
-    assert cli(["distill", "--teacher", str(fake), "--encoder", str(encoder), "--out",
+    assert cli(["distill", "--run", str(fake), "--encoder", str(encoder), "--out",
                 str(tmp_path / "s2"), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert "--teacher" in err and "not a trained teacher run" in err
+    assert "--run" in err and "not a trained teacher run" in err

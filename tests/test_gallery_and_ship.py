@@ -37,12 +37,12 @@ def testpick_steps_and_montage():
 
 
 def test_library_command_is_parsed_and_checked():
-    args = library_arguments("corn-drake objects --num 80 --seed=3 --split unseen --out data/x")
-    assert args == {"--num": "80", "--seed": "3", "--split": "unseen", "--out": "data/x"}
+    args = library_arguments("corn-drake objects --num-objects 80 --seed=3 --split unseen --out data/x")
+    assert args == {"--num-objects": "80", "--seed": "3", "--split": "unseen", "--out": "data/x"}
     with pytest.raises(InputError, match="corn-drake objects"):
         library_arguments("python build.py --out x")
     with pytest.raises(InputError, match="no --out"):
-        library_arguments("corn-drake objects --num 8")
+        library_arguments("corn-drake objects --num-objects 8")
 
 
 def test_a_card_quotes_only_its_own_runs_unseen_report(tmp_path):

@@ -14,7 +14,7 @@ from corn_drake.errors import InputError, MissingInputError
 from corn_drake.evaluation.shipped_card import library_card_fields, require_library, warn_if_other_library
 from tests.fixtures import write_loadable_library
 
-COMMAND = "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen"
+COMMAND = "corn-drake objects --num-objects 80 --seed 0 --split unseen --out data/library_unseen"
 
 
 @pytest.fixture

@@ -8,9 +8,14 @@ and no committed cell may hold an error. After changing a notebook or what it sh
 the committed outputs with
 
     CORN_DRAKE_WRITE_NOTEBOOKS=1 .venv/bin/python -m pytest tests/test_notebooks.py -m ""
+
+which writes the outputs with the run's temporary folder shown as the default runs/notebooks and
+this checkout's root as relative paths: every committed notebook must show a figure and name no
+machine's folder (test_committed_notebooks_show_a_figure_and_no_machine_paths).
 """
 
 import os
+import re
 from pathlib import Path
 
 import nbformat
@@ -26,7 +31,9 @@ RECORDING_NOTEBOOKS = {"01_scene_and_controller.ipynb", "04_teacher_rollout.ipyn
                        "05_perception.ipynb", "06_student.ipynb", "08_contact_primitives.ipynb"}
 EXPECTED_FIGURES = {"05_perception.ipynb": ["05_depth_images.png", "05_tracking_error.png"]}
 # How many figures each plotting notebook shows inline (image outputs of its cells).
-INLINE_FIGURES = {"04_teacher_rollout.ipynb": 1, "05_perception.ipynb": 2, "06_student.ipynb": 2,
+INLINE_FIGURES = {"01_scene_and_controller.ipynb": 1, "02_objects.ipynb": 1,
+                  "03_contact_pretraining.ipynb": 1, "04_teacher_rollout.ipynb": 1,
+                  "05_perception.ipynb": 2, "06_student.ipynb": 2,
                   "07_results.ipynb": 11, "08_contact_primitives.ipynb": 1}
 # 04 renders a gallery still; 06 runs the student's cameras.
 NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb", "06_student.ipynb"}
@@ -35,6 +42,29 @@ NEEDS_RENDERING = {"04_teacher_rollout.ipynb", "05_perception.ipynb", "06_studen
 SLOW = {"02_objects.ipynb", "03_contact_pretraining.ipynb"}
 NOTEBOOKS = [pytest.param(name, marks=[pytest.mark.slow] if name in SLOW else [])
              for name in sorted(p.name for p in (REPO_ROOT / "notebooks").glob("*.ipynb"))]
+
+
+# An absolute path of one machine (a temporary folder, a home, a checkout) in a committed output
+# says nothing to a reader elsewhere; outputs show paths as a run from the repository root with
+# the default output folder would (_without_machine_paths).
+MACHINE_PATH = re.compile(r"(/tmp/|/var/folders/|/private/|/home/|/root/|/Users/|/work/)")
+DEFAULT_OUT = "runs/notebooks"
+
+
+def _without_machine_paths(nb, out: Path):
+    """`nb` with this run's output folder written as the notebooks' default one and this
+    checkout's root as the relative path it is, in every text output."""
+    def clean(text: str) -> str:
+        return text.replace(str(out), DEFAULT_OUT).replace(f"{REPO_ROOT}/", "")
+
+    for cell in nb.cells:
+        for out_ in cell.get("outputs", []) if cell.cell_type == "code" else []:
+            if "text" in out_:
+                out_["text"] = clean(out_["text"])
+            for kind, value in out_.get("data", {}).items():
+                if kind.startswith("text/") and isinstance(value, str):
+                    out_["data"][kind] = clean(value)
+    return nb
 
 
 def _image_outputs(nb) -> int:
@@ -88,7 +118,7 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     NotebookClient(nb, timeout=600, kernel_name="python3", record_timing=False,
                    resources={"metadata": {"path": str(REPO_ROOT)}}).execute()
     if os.environ.get("CORN_DRAKE_WRITE_NOTEBOOKS") == "1":
-        nbformat.write(nb, path)
+        nbformat.write(_without_machine_paths(nb, tmp_path), path)
     else:
         assert _output_kinds(committed) == _output_kinds(nb), (
             f"{name}: its committed outputs are stale (see this module's docstring to refresh)")
@@ -102,6 +132,19 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
         text = _text_outputs(nb)
         assert "before the fidelity fixes" in text and "after the fidelity fixes" in text
         assert "not labelled here" not in text
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (REPO_ROOT / "notebooks").glob("*.ipynb")))
+def test_committed_notebooks_show_a_figure_and_no_machine_paths(name):
+    """Read on a code host, each notebook shows at least one picture, and its outputs name no
+    folder of the machine that ran it."""
+    nb = nbformat.read(REPO_ROOT / "notebooks" / name, as_version=4)
+    assert _image_outputs(nb) >= 1, f"{name}: no figure in its committed outputs"
+    text = "\n".join(str(out.get("text", "")) + "".join(
+        str(v) for k, v in out.get("data", {}).items() if k.startswith("text/"))
+        for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", []))
+    found = MACHINE_PATH.findall(text)
+    assert not found, f"{name}: its committed outputs name machine paths ({sorted(set(found))})"
 
 
 def test_library_plots_leave_the_notebook_backend_alone(tmp_path):

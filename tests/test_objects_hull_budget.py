@@ -41,21 +41,21 @@ def test_the_flag_reaches_the_build_and_a_resume_with_another_is_refused(tmp_pat
                         lambda out, num, seed, cfg, *a, **k: seen.append(
                             cfg.decomposition.max_convex_hull) or Manifest())
     out = tmp_path / "lib"
-    assert main(["objects", "--num", "2", "--max-hulls", "8", "--out", str(out)]) == 0
+    assert main(["objects", "--num-objects", "2", "--max-hulls", "8", "--out", str(out)]) == 0
     assert seen == [8]
     assert json.loads((out / "arguments.json").read_text())["--max-hulls"] == 8
-    assert main(["objects", "--num", "2", "--out", str(out)]) == 2
+    assert main(["objects", "--num-objects", "2", "--out", str(out)]) == 2
     one_error_line(capsys, "--max-hulls: recorded 8, requested 16")
     for bad in ("0", "-3", "two"):
         with pytest.raises(SystemExit):
-            main(["objects", "--num", "2", "--max-hulls", bad, "--out", str(tmp_path / "x")])
+            main(["objects", "--num-objects", "2", "--max-hulls", bad, "--out", str(tmp_path / "x")])
         assert "--max-hulls" in capsys.readouterr().err
 
 
 def test_a_cards_library_command_names_the_budget_its_library_was_built_with(tmp_path):
     lib = tmp_path / "lib"
     lib.mkdir()
-    command = f"corn-drake objects --num 80 --seed 0 --split unseen --out {lib}"
+    command = f"corn-drake objects --num-objects 80 --seed 0 --split unseen --out {lib}"
     # A library recorded before the flag existed was built with 16.
     assert with_hull_budget(command, library_arguments(command)) == f"{command} --max-hulls 16"
     (lib / "arguments.json").write_text(json.dumps({"--seed": 0, "--max-hulls": 8}))

@@ -17,7 +17,7 @@ from corn_drake.cli import main
 
 # Block, book, bottle and bowl: the first four objects of every procedural build (all concave,
 # so CoACD and its cache are covered too); 6 drops each keeps one object to a few seconds.
-SMALL = ["objects", "--num", "4", "--seed", "0", "--drops", "6", "--no-progress"]
+SMALL = ["objects", "--num-objects", "4", "--seed", "0", "--drops", "6", "--no-progress"]
 
 
 def _files(library: Path) -> dict[str, str]:

@@ -141,7 +141,7 @@ def shipped(tmp_path_factory):
     out, printed = root / "weights" / "push_primitive", io.StringIO()
     with contextlib.redirect_stdout(printed):
         assert main(["ship", "--run", str(run), "--report", str(report), "--library-command",
-                     f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                     f"corn-drake objects --num-objects 2 --seed 0 --split unseen --out {library}",
                      "--train-command", "corn-drake train --policy primitive ...",
                      "--out", str(out)]) == 0
     return run, library, json.loads(report.read_text()), out, printed.getvalue()
@@ -234,7 +234,8 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     first = report["episodes"][0]
     gallery = tmp_path / "gallery"
     assert main(["gallery", "--run", str(out), "--objects", str(library), "--ids",
-                 first["object"], "--out", str(gallery)]) == 0
+                 first["object"], "--out", str(gallery), "--animate", "--frames", "3",
+                 "--frame-height", "48"]) == 0
     data = json.loads((gallery / "gallery.json").read_text())
     assert data["policy"] == "primitive" and data["painted"] == "location scores"
     entry = data["episodes"][0]
@@ -249,6 +250,12 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
         entry["points_painted"]
     assert min(painted) > 10
     assert (gallery / entry["image"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The same episode as a GIF: its first, middle and last step, 64 x 48.
+    from PIL import Image
+
+    assert entry["animation_steps"] == [0, first["steps"] // 2, first["steps"]]
+    with Image.open(gallery / entry["animation"]) as gif:
+        assert (gif.format, gif.n_frames, gif.size) == ("GIF", 3, (64, 48))
 
 
 # An outcome model file's learning curve (rl/primitive/outcome/model.fit_network's rows).
@@ -296,7 +303,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
     for out in (alone, beside):
         assert main(["ship", "--run", str(outcome), "--report", str(report_path),
                      "--library-command",
-                     f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                     f"corn-drake objects --num-objects 2 --seed 0 --split unseen --out {library}",
                      "--train-command", "corn-drake fit-outcome ...", "--out", str(out)]) == 0
         card = json.loads((out / "card.json").read_text())
         shipped_cfg, shipped_agent, _ = load_primitive_run(out)

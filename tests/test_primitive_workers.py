@@ -42,7 +42,8 @@ def _trainer(tmp_path, workers: int, steps: int = 8) -> PrimitiveTrainer:
 def local_ray():
     from corn_drake.rl.workers.ray_workers import init_ray
 
-    init_ray(num_cpus=2)
+    # CPUs to spare: a test's trainers hold their workers (1 CPU each) side by side.
+    init_ray(num_cpus=8)
     yield
     ray.shutdown()
 

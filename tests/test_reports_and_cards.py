@@ -97,7 +97,7 @@ def student_run(tmp_path):
 
 def _ship(run, library, report, out, *flags):
     return main(["ship", "--run", str(run), "--report", str(report), "--library-command",
-                 f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                 f"corn-drake objects --num-objects 2 --seed 0 --split unseen --out {library}",
                  "--out", str(out), *flags])
 
 

@@ -208,7 +208,7 @@ def test_every_writing_command_refuses_a_locked_folder(tmp_path, capsys, command
                              shard_size=64, progress=False)
         argv = {"pretrain": ["--data", str(tmp_path / "data"), "--steps", "2"],
                 "contact-data": ["--objects", str(lib), "--num-samples", "64"],
-                "objects": ["--num", "1", "--drops", "8"]}[command]
+                "objects": ["--num-objects", "1", "--drops", "8"]}[command]
         capsys.readouterr()
         assert main([command, *argv, "--out", str(out), "--no-progress"]) == 2
         one_error_line(capsys, str(out), "in use")
@@ -246,22 +246,22 @@ def test_contact_data_refuses_another_seed_and_keeps_its_shards(tmp_path, capsys
 def test_objects_refuses_another_seed_and_grows_with_more_objects(tmp_path, capsys):
     out = tmp_path / "lib"
     args = ["objects", "--drops", "8", "--out", str(out), "--no-progress"]
-    assert main([*args, "--num", "1", "--seed", "0"]) == 0
+    assert main([*args, "--num-objects", "1", "--seed", "0"]) == 0
     before = _files(out)
     capsys.readouterr()
-    assert main([*args, "--num", "1", "--seed", "1"]) == 2
+    assert main([*args, "--num-objects", "1", "--seed", "1"]) == 2
     one_error_line(capsys, "--seed: recorded 0, requested 1")
-    assert main([*args, "--num", "1", "--drops", "9", "--seed", "0"]) == 2
+    assert main([*args, "--num-objects", "1", "--drops", "9", "--seed", "0"]) == 2
     one_error_line(capsys, "--drops: recorded 8, requested 9")
     assert _files(out) == before
-    assert main([*args, "--num", "2", "--seed", "0"]) == 0
+    assert main([*args, "--num-objects", "2", "--seed", "0"]) == 0
     assert len(json.loads((out / "manifest.json").read_text())["objects"]) == 2
 
 
 # --- item 13: a run trained on a whole library evaluates over the library ---------------------
 def test_evaluate_a_library_trained_run_over_the_requested_split(tmp_path):
     lib, run = tmp_path / "lib", tmp_path / "run"
-    assert main(["objects", "--num", "2", "--drops", "8", "--out", str(lib), "--no-progress"]) == 0
+    assert main(["objects", "--num-objects", "2", "--drops", "8", "--out", str(lib), "--no-progress"]) == 0
     train_ids = [o["id"] for o in json.loads((lib / "manifest.json").read_text())["objects"]
                  if o["split"] == "train"]
     assert len(train_ids) == 2

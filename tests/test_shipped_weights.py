@@ -96,7 +96,7 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
 
 @pytest.fixture(scope="module")
 def replayed(tmp_path_factory):
-    """The corn card's library command, cut to the two held-out-family objects (`--num 14`
+    """The corn card's library command, cut to the two held-out-family objects (`--num-objects 14`
     plans one object per family: bottle_000 and wedge_000, the 80-object build's), then
     `evaluate --run models/weights/<corn>` on it as the README gives it: (card folder, card,
     library folder, the replay's report, what evaluate wrote to stderr)."""
@@ -106,7 +106,7 @@ def replayed(tmp_path_factory):
     words = shlex.split(card["library_command"])
     library = library_arguments(card["library_command"])
     argv = words[1:]
-    argv[argv.index("--num") + 1] = "14"
+    argv[argv.index("--num-objects") + 1] = "14"
     argv[argv.index("--out") + 1] = str(tmp_path / "lib")
     assert library["--split"] == "unseen"
     assert main(argv + ["--no-progress"]) == 0

@@ -197,7 +197,7 @@ def test_ship_a_student_run_evaluates_as_the_run(tmp_path, capsys):
     assert main(["evaluate", "--run", str(run), *args, "--report", str(report)]) == 0
     out = tmp_path / "weights" / "student"
     assert main(["ship", "--run", str(run), "--report", str(report), "--library-command",
-                 f"corn-drake objects --num 2 --seed 0 --split unseen --out {library}",
+                 f"corn-drake objects --num-objects 2 --seed 0 --split unseen --out {library}",
                  "--out", str(out)]) == 0
     card = json.loads((out / "card.json").read_text())
     assert card["policy"] == "student" and card["perception"] == "geometric"

@@ -3,8 +3,12 @@
 Accepted: OBJ, STL, PLY, GLB/GLTF, OFF (trimesh loaders). Scenes are merged; NaN/inf vertices,
 empty files, garbage bytes, degenerate-only meshes and unsupported extensions are rejected with a
 reason; several disconnected bodies keep the largest (with a warning); an open mesh is repaired
-by trimesh, and if it stays open, replaced by its convex hull with a recorded warning. Scale is
-normalised later, so a mesh in millimetres (or 1e4x too large) only gets a warning.
+by trimesh, and if it stays open, replaced by its convex hull with a recorded warning.
+
+A mesh file carries no unit (glTF's is metres by its specification): `detect_unit` reads one
+from the mesh's size, the first of metres, millimetres and centimetres that makes it a tabletop
+object (1 cm to 1 m across). The library then rescales every mesh to its radius range, or with
+`objects --keep-size` keeps its size in that unit where it fits (process.ProcessConfig).
 """
 
 from __future__ import annotations
@@ -51,9 +55,6 @@ def load_watertight(path: Path) -> tuple[trimesh.Trimesh, list[str]]:
         bodies = sorted(bodies, key=lambda b: b.area, reverse=True)
         warnings.append(f"{len(bodies)} separate bodies: kept the largest")
         mesh = bodies[0]
-    size = float(np.ptp(mesh.vertices, axis=0).max())
-    if size > 2.0 or size < 0.005:
-        warnings.append(f"size {size:.4g} (units?): rescaled to the library's radius range")
     if not mesh.is_watertight:
         trimesh.repair.fill_holes(mesh)
         trimesh.repair.fix_normals(mesh)
@@ -65,3 +66,22 @@ def load_watertight(path: Path) -> tuple[trimesh.Trimesh, list[str]]:
     if mesh.volume < 0:
         mesh.invert()
     return mesh, warnings
+
+
+# Sizes across (m) a tabletop object has: the test of a unit read from a mesh's size.
+TABLETOP_ACROSS = (0.01, 1.0)
+# The units tried, in order (metres first: a mesh that reads as a tabletop object in metres is
+# taken so; millimetres before centimetres, CAD's and STL's usual unit).
+UNITS = (("metres", 1.0), ("millimetres", 1e-3), ("centimetres", 1e-2))
+
+
+def detect_unit(size: float, suffix: str) -> tuple[str, float, str]:
+    """(unit, metres per unit, how it was found) of a mesh whose largest extent is `size` in the
+    file's numbers; a file type whose format fixes the unit (glTF: metres) keeps it."""
+    if suffix.lower() in (".glb", ".gltf"):
+        return "metres", 1.0, "glTF's unit"
+    lo, hi = TABLETOP_ACROSS
+    for unit, metres in UNITS:
+        if lo <= size * metres <= hi:
+            return unit, metres, "from its size"
+    return "metres", 1.0, f"no unit makes {size:.4g} a tabletop size (1 cm to 1 m)"

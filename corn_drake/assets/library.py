@@ -16,6 +16,7 @@ import json
 import time
 import zlib
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -38,6 +39,20 @@ SPEC_FIELDS = ("mass", "unit_inertia", "cloud", "stable_poses", "radius", "bbox_
 
 def list_objects(library: str | Path, split: str | None = None) -> list[str]:
     return read_manifest(library).ids(split)
+
+
+def empty_split_hint(library: str | Path, split: str, flag: str = "--split") -> str:
+    """What to say when `library` has no `split` objects: the splits that have some, as the
+    `flag` values that would find them ("" if the library is empty too)."""
+    from collections import Counter
+
+    counts = Counter(o.split for o in read_manifest(library).objects)
+    held = [f"{n} {name}" for name, n in sorted(counts.items()) if n]
+    if not held:
+        return ""
+    others = " or ".join(f"{flag} {name}" for name, n in sorted(counts.items()) if n)
+    return (f" (it holds {', '.join(held)}; an ingested folder of a few meshes has no unseen "
+            f"ones): use {flag} all, or {others}")
 
 
 def object_groups(library: str | Path) -> dict[str, str]:
@@ -175,7 +190,8 @@ def _save(out: Path, manifest: Manifest, seed: int,
         extra = [o.id for o in manifest.objects if o.id not in by_id]
         if extra:
             raise InputError(f"{manifest_path(out)} holds objects beyond the {len(planned)} "
-                             f"planned ({', '.join(extra[:5])}...): build it with its own --num")
+                             f"planned ({', '.join(extra[:5])}...): build it with its own "
+                             "--num-objects")
         for o in manifest.objects:
             o.split, o.unseen_group = by_id[o.id].split, by_id[o.id].unseen_group
         rule["split_over_planned"] = len(planned)
@@ -379,8 +395,15 @@ def ingested_ids(source: Path, files: list[Path], manifest: Manifest, out: Path)
 
 
 def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
-                  cfg: ProcessConfig | None = None, progress: bool = True) -> Manifest:
+                  cfg: ProcessConfig | None = None, progress: bool = True,
+                  say: Callable[[str], None] | None = None) -> Manifest:
+    """Every mesh file of `source` as an object of the library `out`, or its rejection. Each
+    mesh's size rule (assets/mesh_scale.py: its size, unit and the scale applied; with
+    cfg.keep_size its real size, or a rejection where it does not fit) is recorded in its entry
+    and, with `say`, told in one line."""
     from tqdm import tqdm
+
+    from corn_drake.assets.mesh_scale import size_rule
 
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
     if not source.is_dir():
@@ -403,16 +426,23 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
         rng = np.random.default_rng(obj_seed)
         try:
             mesh, warnings = load_watertight(path)
+            mesh, rule = size_rule(mesh, path.suffix, cfg)
         except Rejected as e:
             manifest.rejected.append(Rejection(rel, str(e)))
             _save(out, manifest, seed, timings=timings)
             continue
         object_id = ids[rel]
+        warnings += [w for w in [rule.warning()] if w]
         entry = LibraryObject(id=object_id, source=rel, family=INGESTED_FAMILY, warnings=warnings)
         convex = bool(abs(mesh.volume - mesh.convex_hull.volume) < 1e-3 * mesh.volume)
         try:
             _add(out, manifest, timings, entry, rng, mesh, convex, cfg, out / ".coacd_cache")
         except Exception as e:  # one bad object must not end the run
             manifest.rejected.append(Rejection(rel, f"processing failed: {e}"))
+        added = manifest.objects[-1] if manifest.objects else None
+        if added is not None and added.source == rel:
+            added.extra = {**added.extra, "scale": rule.record(added.radius)}
+            if say is not None:
+                say(rule.line(object_id, rel, added.radius, cfg))
         _save(out, manifest, seed, timings=timings)
     return manifest

@@ -22,6 +22,13 @@ class ProcessConfig:
     # Object radius range (m) from the authors' code's domain randomisation (the paper itself
     # gives a 0.1-0.3 m scale); contact data uses its own U(0.04, 0.12) (contact/generate.py).
     radius: tuple[float, float] = (0.05, 0.10)
+    # `objects --keep-size`: an ingested mesh keeps its real size (the unit read from the file,
+    # ingest.detect_unit) instead of a radius drawn from `radius`, if that size lies in
+    # `keep_size_radius` (m, the largest distance from the centre of mass): no smaller than the
+    # finger pads are wide (2 cm) and the table's contact resolution (2 cm), no larger than the
+    # paper's largest objects (0.3 m across), which already cover most of the 0.4 x 0.5 m table.
+    keep_size: bool = False
+    keep_size_radius: tuple[float, float] = (0.02, 0.15)
     density: float = 300.0  # kg/m^3, the authors' DexGraspNet conversion
     cloud_points: int = 2048
     thin_ratio: float = 2.5
@@ -78,7 +85,10 @@ def process_object(mesh: trimesh.Trimesh, object_id: str, out: Path, rng: np.ran
     under "timings" its steps' wall times (which the builder keeps out of the manifest)."""
     timings = {}
     t = time.perf_counter()
-    mesh = normalise(mesh, rng.uniform(*cfg.radius))
+    target = rng.uniform(*cfg.radius)  # drawn either way: the rest of the stream stays the same
+    if cfg.keep_size:  # its own size (ingest checked that it fits keep_size_radius)
+        target = float(np.linalg.norm(mesh.vertices - mesh.center_mass, axis=1).max())
+    mesh = normalise(mesh, target)
     radius = float(np.linalg.norm(mesh.vertices, axis=1).max())
     if convex:
         hulls, coacd_runs = [mesh.convex_hull], 0

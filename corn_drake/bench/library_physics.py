@@ -41,7 +41,7 @@ def common_objects(libraries: list[str], split: str | None) -> list[str]:
         if missing:
             raise InputError(f"--objects {library} lacks {len(missing)} of {libraries[0]}'s "
                              f"objects ({', '.join(missing[:3])}...): build it with the same "
-                             "--num, --seed and --split")
+                             "--num-objects, --seed and --split")
     return ids
 
 

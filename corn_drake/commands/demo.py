@@ -37,9 +37,10 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of every stage (library, contact data, pretraining, teacher)")
     parser.add_argument("--num-objects", type=positive_int, default=14,
-                        help="procedural objects in the demo's library (as `objects --num`)")
-    parser.add_argument("--contact-samples", type=positive_int, default=20_000,
-                        help="contact-data training samples")
+                        help="procedural objects in the demo's library (as `objects "
+                             "--num-objects`)")
+    parser.add_argument("--num-samples", type=positive_int, default=20_000,
+                        help="contact-data training samples (as `contact-data --num-samples`)")
     parser.add_argument("--pretrain-steps", type=positive_int, default=300,
                         help="contact-pretraining steps of the CORN encoder")
     parser.add_argument("--train-steps", type=positive_int, default=4096, help="teacher env steps")
@@ -49,6 +50,7 @@ def add_arguments(parser):
                         help="policy steps of the simulation-speed measurement")
     add_renamed(parser, "--objects", "--num-objects",
                 " (a count; --objects is an object library folder in every other command)")
+    add_renamed(parser, "--contact-samples", "--num-samples", " (as in `contact-data`)")
 
 
 def _stage(name: str, outputs: dict, t0: float):
@@ -85,7 +87,7 @@ def run(args) -> int:
 
     _stage("2/6 contact data", outputs, t0)
     data = out / "contact_data"
-    generate_dataset(library, data, args.contact_samples, args.seed, progress=False)
+    generate_dataset(library, data, args.num_samples, args.seed, progress=False)
     outputs["contact dataset"] = data / "manifest.json"
 
     _stage("3/6 contact pretraining", outputs, t0)

@@ -1,17 +1,26 @@
-"""`corn-drake distill`: DAgger distillation of a trained teacher into the student (rl/dagger.py)."""
+"""`corn-drake distill`: DAgger distillation of a trained teacher into the student (rl/dagger.py).
+
+The teacher is a PPO run (`corn-drake train`; a primitive run, trained with TD3, is no teacher
+here); the student (camera point cloud -> CORN encoder -> GRU -> action) learns from it with
+DAgger. The student's env is the teacher run's, with the student layer (`--config`), the `--task`
+overlay and `--set KEY=VALUE` on top.
+"""
 
 from __future__ import annotations
 
 import copy
 from pathlib import Path
 
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.run_flags import (RESUME_MAY_CHANGE, RUN_SHORTCUTS, add_run_arguments,
                                             flag_of_field)
+from corn_drake.arguments.torch_threads import add_torch_threads_argument
 from corn_drake.arguments.value_types import (finite_float, nonnegative_int, positive_float,
                                                positive_int)
 
 NAME = "distill"
-HELP = "distil a trained teacher into the student with DAgger (resumes from OUT/checkpoints/last.pt)"
+HELP = ("distil a PPO-trained teacher run into the camera-based student with DAgger (resumes "
+        "from OUT/checkpoints/last.pt)")
 
 # Flags that set one DistillConfig field: argparse dest -> field (the run settings' shared flags,
 # then distill's own). They default to None: a new run takes the field's default, a resumed
@@ -31,9 +40,20 @@ def add_arguments(parser):
 
     add_run_arguments(parser, NAME, encoder_help="contact-pretrained CORN encoder for the "
                                                  "student (default: the teacher run's encoder)")
-    parser.add_argument("--teacher", default=None,
-                        help="the teacher's run folder (written by `corn-drake train`); "
-                             "required for a new run (default: a resumed run's recorded one)")
+    parser.add_argument("--run", dest="teacher", default=None, metavar="RUN",
+                        help="the teacher's run folder (written by `corn-drake train`, PPO, or "
+                             "shipped in models/weights/), as `evaluate --run`; required for a "
+                             "new run (default: a resumed run's recorded one)")
+    add_renamed(parser, "--teacher", "--run", " (the teacher's run folder, as in `evaluate`)")
+    parser.add_argument("--task", default=None,
+                        help="task overlay read on top of the teacher run's env: a name in "
+                             "diagrams/tasks/ or a YAML file (default: the teacher's task)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                        help="override a config field, e.g. --set window=16 or --set "
+                             "task.episode_steps=50 (repeatable; KEY a DistillConfig field, the "
+                             "student diagram's sections segmentation/cameras/tracker/"
+                             "observation, or the teacher env's scene/randomization/controller/"
+                             "task, without env. or env.teacher.; default: none)")
     parser.add_argument("--config", default=None,
                         help="student diagram layer read on top of the teacher run's env "
                              "(default: diagrams/student_rollout.yaml)")
@@ -56,20 +76,23 @@ def add_arguments(parser):
                         help="windows between checkpoints (default: 50)")
     parser.add_argument("--log-every", type=positive_int, default=None,
                         help="windows per metrics row and TensorBoard point (default: 10)")
+    add_torch_threads_argument(parser, "the student's and teacher's inference and the DAgger "
+                                       "updates (not recorded in the run: it changes the speed, "
+                                       "not the results)")
 
 
 def load_teacher(run: str):
     """(TrainConfig, TeacherAgent) of the teacher run folder `run`; anything that makes it no
-    teacher run is an InputError naming --teacher."""
+    teacher run is an InputError naming --run."""
     from corn_drake.errors import InputError, MissingInputError
     from corn_drake.rl.checkpoints import load_run
 
     if not Path(run).is_dir():
-        raise MissingInputError(f"--teacher {run}: no such run folder")
+        raise MissingInputError(f"--run {run}: no such run folder (the teacher's)")
     try:
         return load_run(run)
     except InputError as e:
-        raise InputError(f"--teacher {run} is not a trained teacher run: {e}") from None
+        raise InputError(f"--run {run} is not a trained teacher run: {e}") from None
 
 
 def student_env_config(teacher_env, layer: str | None):
@@ -81,21 +104,59 @@ def student_env_config(teacher_env, layer: str | None):
     return load_student_config(layer, base=StudentDiagramConfig(teacher=copy.deepcopy(teacher_env)))
 
 
+def with_task(teacher_env, task: str | None):
+    """The teacher run's env with the `--task` overlay read on top (None: as it is)."""
+    if task is None:
+        return teacher_env
+    from corn_drake.config.diagram_files import task_file
+    from corn_drake.config.loader import load_config
+    from corn_drake.config.teacher import TeacherDiagramConfig
+
+    path = task_file(task)
+    env = copy.deepcopy(teacher_env)
+    env.task.name = path.stem  # the name unless the overlay sets its own on top
+    return load_config(TeacherDiagramConfig, path, defaults=env)
+
+
+# The teacher env's sections, which --set names without env.teacher. (as train's --set does).
+TEACHER_ENV_SECTIONS = ("scene", "randomization", "controller", "task")
+
+
+def apply_distill_sets(cfg, items):
+    """`cfg` with `--set KEY=VALUE` items on top: a key in one of TEACHER_ENV_SECTIONS is the
+    teacher env's (env.teacher.KEY), a student diagram section's is env.KEY."""
+    from corn_drake.config.overrides import apply_sets
+
+    for item in items:
+        key = item.partition("=")[0].strip()
+        full = f"env.teacher.{item.strip()}" if key.split(".")[0] in TEACHER_ENV_SECTIONS else item
+        try:
+            cfg = apply_sets(cfg, [full])
+        except Exception as e:  # the error names the user's spelling, not the full key
+            from corn_drake.errors import InputError
+
+            if not isinstance(e, InputError) or full == item:
+                raise
+            raise InputError(str(e).replace(f"--set {full}", f"--set {item}", 1)) from None
+    return cfg
+
+
 def requested_config(args, recorded, teacher_cfg):
     """The DistillConfig `args` ask for, on top of the `recorded` one of a resumed run (None: a
     new run)."""
     from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
 
+    task = getattr(args, "task", None)
     if recorded is None:
         cfg = DistillConfig(teacher=args.teacher, encoder=teacher_cfg.encoder,
-                            env=student_env_config(teacher_cfg.env, args.config))
+                            env=student_env_config(with_task(teacher_cfg.env, task), args.config))
     else:
         cfg = copy.deepcopy(recorded)
         if args.teacher is not None:
             cfg.teacher = args.teacher
-        if args.config is not None:  # the objects and segmentation stay the run's (flags below)
-            env = student_env_config(teacher_cfg.env, args.config)
+        if args.config is not None or task is not None:  # objects, segmentation: the run's
+            env = student_env_config(with_task(teacher_cfg.env, task), args.config)
             env.teacher.scene.object = cfg.env.teacher.scene.object
             env.segmentation.mode = cfg.env.segmentation.mode
             cfg.env = env
@@ -109,6 +170,7 @@ def requested_config(args, recorded, teacher_cfg):
             "library", args.objects, "train", "")
     if args.perception is not None:
         cfg.env.segmentation.mode = args.perception
+    cfg = apply_distill_sets(cfg, getattr(args, "set", None) or [])
     if not cfg.encoder:
         raise InputError(f"--encoder: the teacher run {cfg.teacher} ({teacher_cfg.policy} policy) "
                          "records no pretrained encoder; give the student's CORN encoder")
@@ -120,13 +182,15 @@ def run(args) -> int:
     from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
     from corn_drake.nn.student_io import student_from_encoder
+    from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.dagger import DaggerTrainer
     from corn_drake.rl.pretrained_encoders import check_pretrained
     from corn_drake.run_folders.config_file import run_config_path
     from corn_drake.run_folders.resumable import ResumableRun
 
     if not run_config_path(args.out).is_file() and args.teacher is None:
-        raise InputError("--teacher is required for a new run (the teacher's run folder)")
+        raise InputError("--run is required for a new run (the teacher's run folder, written "
+                         "by `corn-drake train`)")
     def check_new():  # a new run's own argument errors, named before a folder it cannot take
         requested_config(args, None, load_teacher(args.teacher)[0])
 
@@ -150,7 +214,8 @@ def run(args) -> int:
         run_folder.write_config(cfg, f"teacher {cfg.teacher} ({teacher_cfg.policy}), perception "
                                      f"{cfg.env.segmentation.mode}, {cfg.total_steps} steps",
                                 kind="student run", at_step=trainer.global_step)
-        metrics = trainer.train(progress=not args.no_progress)
+        with torch_threads(args.torch_threads):
+            metrics = trainer.train(progress=not args.no_progress)
     print(f"distilled {metrics['global_step']} steps; run folder {run_folder.out}")
     return 0
 
@@ -161,11 +226,15 @@ def argument_of_field(field: str) -> str:
     if flag is not None:
         return flag
     if field == "teacher":
-        return "--teacher"
+        return "--run"
     if field.startswith("env.teacher.scene.object."):
         return "--objects"
+    if field.startswith("env.teacher.task."):
+        return f"--task or --set {field[len('env.teacher.'):]}"
     if field == "env.segmentation.mode":
         return "--perception"
+    if field.startswith("env.teacher."):
+        return f"--config or --set {field[len('env.teacher.'):]}"
     if field.startswith("env."):
-        return f"--config ({field[4:]})"
-    return field
+        return f"--config or --set {field[4:]}"
+    return f"--set {field}"

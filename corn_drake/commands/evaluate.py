@@ -56,6 +56,9 @@ def add_arguments(parser):
                         help="which objects of the library the episodes go round-robin over")
     parser.add_argument("--episodes", type=positive_int, default=10,
                         help="episodes in all, round-robin over the objects")
+    parser.add_argument("--episodes-from", type=nonnegative_int, default=0, metavar="K",
+                        help="--run planner only: play episodes K..--episodes-1 (to spread "
+                             "them over processes; a rerun resumes REPORT.rows.jsonl)")
     parser.add_argument("--record", type=nonnegative_int, default=1, metavar="N",
                         help="the first N episodes saved as Meshcat HTML in REPORT_recordings/ beside the "
                              "report (0: none)")
@@ -117,7 +120,10 @@ def _object_specs(args, cfg):
     require_library(args.run, library, given=bool(args.objects))
     ids = list_objects(library, None if args.split == "all" else args.split)
     if not ids:
-        raise InputError(f"no {args.split} objects in library {library}")
+        from corn_drake.assets.library import empty_split_hint
+
+        raise InputError(f"no {args.split} objects in library {library}"
+                         f"{empty_split_hint(library, args.split)}")
     warn_if_other_library(args.run, library, ids)
     return [(i, load_object_spec(library, i)) for i in ids]
 
@@ -156,6 +162,15 @@ def _refuse_flags(args, kind: str) -> None:
     if kind == "reference" and args.attention:
         raise InputError(f"--attention shows a learned policy's cross-attention; --run "
                          f"{args.run} is a reference controller, which has none")
+    if args.episodes_from and kind != "planner":
+        raise InputError(f"--episodes-from applies to --run planner; --run {args.run} plays "
+                         "episodes 0..--episodes-1")
+    if kind == "planner" and args.record:
+        raise InputError("--run planner records no Meshcat episodes yet (its search steps the "
+                         "env outside a diagram recording); give --record 0")
+    if kind == "planner" and (args.stochastic or args.attention):
+        raise InputError("--stochastic and --attention apply to a learned policy; --run "
+                         "planner is a deterministic search")
     if kind == "reference" and args.stochastic:
         raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
                          "deterministic reference controller")
@@ -213,10 +228,18 @@ def _evaluate(args, report_path: Path, out_dir: Path):
 
     try:
         # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
-        with torch_threads(args.torch_threads):
-            report = evaluate(loaded.agent, cfg, objects, args.episodes, args.record, args.seed,
-                              out_dir, stochastic=args.stochastic, attention=args.attention,
-                              meshcat=meshcat, progress=not args.no_progress)
+        if loaded.kind == "planner":
+            from corn_drake.evaluation.planner_episodes import evaluate_planner
+
+            report = evaluate_planner(loaded.agent, cfg, objects,
+                                      range(args.episodes_from, args.episodes), args.seed,
+                                      report_path, progress=not args.no_progress)
+        else:
+            with torch_threads(args.torch_threads):
+                report = evaluate(loaded.agent, cfg, objects, args.episodes, args.record,
+                                  args.seed, out_dir, stochastic=args.stochastic,
+                                  attention=args.attention, meshcat=meshcat,
+                                  progress=not args.no_progress)
     except BaseException as e:  # noqa: BLE001 - an interrupt after some episodes: keep them
         partial = getattr(e, "partial_report", None)
         if partial is not None:

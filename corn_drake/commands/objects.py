@@ -3,7 +3,8 @@
 OUT is locked while the command runs. Building into an existing library resumes it only with the
 --source, --seed, --drops and --max-hulls it was made with (recorded in OUT/arguments.json;
 libraries made before the record was kept are not checked, nor --max-hulls in libraries recorded
-before it existed: they were built with 16); a procedural --num may grow, adding objects.
+before it existed: they were built with 16); a procedural --num-objects may grow, adding
+objects (a library recorded with the old spelling, --num, resumes the same).
 --workers N builds procedural objects in N processes (assets/build_pool.py), the same library.
 """
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import positive_int, seed_int
 
 if TYPE_CHECKING:
@@ -23,6 +25,9 @@ DEFAULT_MAX_HULLS = 16
 # The budget of libraries whose arguments.json predates --max-hulls: they were built with 16.
 UNRECORDED_MAX_HULLS = 16
 
+# Arguments a library's arguments.json may record under an older spelling -> the current one.
+RECORDED_RENAMES = {"--num": "--num-objects"}
+
 NAME = "objects"
 HELP = "build an object library: --source procedural, or --source PATH (OBJ/STL/PLY/GLB/OFF)"
 
@@ -33,7 +38,9 @@ def add_arguments(parser):
                              "its path's letters and digits (others made _), and a folder whose "
                              "files would share an id (cup a.obj, cup_a.obj; Cup.obj, cup.stl) "
                              "is refused, naming them")
-    parser.add_argument("--num", type=positive_int, default=80, help="procedural objects in the full library (train and unseen)")
+    parser.add_argument("--num-objects", type=positive_int, default=80,
+                        help="procedural objects in the full library (train and unseen)")
+    add_renamed(parser, "--num", "--num-objects", " (as in `demo`)")
     parser.add_argument("--seed", type=seed_int, default=0,
                         help="seed of the shapes, the train/unseen split and the drops")
     parser.add_argument("--drops", type=positive_int, default=128,
@@ -44,27 +51,35 @@ def add_arguments(parser):
                              "coarser (the hull-budget study's results)")
     parser.add_argument("--split", choices=("train", "unseen"), default=None,
                         help="procedural only: build just the objects of this split of the full "
-                             "--num build, identical to theirs (e.g. the unseen objects to "
+                             "--num-objects build, identical to theirs (e.g. the unseen objects to "
                              "evaluate shipped weights on); the same command without --split "
                              "completes the library later (default: both splits)")
     parser.add_argument("--workers", type=positive_int, default=1,
                         help="procedural only: processes building objects side by side, one "
                              "thread each (the library is the same as with 1, byte for byte)")
+    parser.add_argument("--keep-size", action="store_true",
+                        help="mesh folders only: keep each mesh's real size (the unit read from "
+                             "its size and said on screen: metres, millimetres or centimetres) "
+                             "instead of rescaling it to the library's 5-10 cm radius, where it "
+                             "fits the gripper and table (radius 2-15 cm); a mesh that does not "
+                             "is rejected, saying why")
     parser.add_argument("--out", required=True, help="library folder, e.g. data/library")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def output_arguments(args) -> dict:
     """The arguments that define the library's objects (each a function of the seed and its
-    index or file). --num is one only for procedural libraries, and may grow: a resume with a
-    larger --num adds objects to the same library."""
+    index or file). --num-objects is one only for procedural libraries, and may grow: a resume
+    with a larger --num-objects adds objects to the same library."""
     import os
 
     procedural = args.source == "procedural"
     recorded = {"--source": args.source if procedural else os.path.normpath(args.source),
                 "--seed": args.seed, "--drops": args.drops, "--max-hulls": args.max_hulls}
     if procedural:
-        recorded["--num"] = args.num
+        recorded["--num-objects"] = args.num_objects
+    else:
+        recorded["--keep-size"] = bool(args.keep_size)
     return recorded
 
 
@@ -106,6 +121,9 @@ def run(args) -> int:
     if args.split is not None and args.source != "procedural":  # before OUT is touched
         raise InputError(f"--split {args.split} builds part of a procedural library; "
                          f"--source {args.source} ingests every mesh of a folder")
+    if args.keep_size and args.source == "procedural":
+        raise InputError("--keep-size keeps the real size of the meshes of a --source folder; "
+                         "procedural shapes have no real size (leave --keep-size out)")
     if args.workers > 1 and args.source != "procedural":  # refused, not silently serial
         raise InputError(f"--workers {args.workers} builds procedural objects side by side; "
                          f"--source {args.source} ingests its meshes one by one (leave "
@@ -113,16 +131,25 @@ def run(args) -> int:
     cfg = ProcessConfig()
     cfg.drops.drops = args.drops
     cfg.decomposition.max_convex_hull = args.max_hulls
+    cfg.keep_size = args.keep_size
     with lock_folder(args.out):
-        resume_arguments(args.out, output_arguments(args), may_grow=("--num",))
+        resume_arguments(args.out, output_arguments(args), may_grow=("--num-objects",),
+                         renamed=RECORDED_RENAMES)
         if args.source == "procedural":
-            manifest = build_procedural(args.out, args.num, args.seed, cfg, not args.no_progress,
+            manifest = build_procedural(args.out, args.num_objects, args.seed, cfg, not args.no_progress,
                                         args.split, workers=args.workers)
         else:
-            manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress)
+            from tqdm import tqdm
+
+            manifest = ingest_folder(args.source, args.out, args.seed, cfg, not args.no_progress,
+                                     say=tqdm.write)  # each mesh's size rule, above the bar
     print(_split_summary(manifest.objects) + f", {len(manifest.rejected)} rejected; "
           f"manifest {args.out}/manifest.json")
     print("\n".join(_stable_pose_summary(manifest.objects)))
     for r in manifest.rejected:
         print(f"  rejected {r.source}: {r.reason}")
+    splits = {o.split for o in manifest.objects}
+    if manifest.objects and len(splits) == 1:  # e.g. a folder of a few meshes: all train
+        print(f"every object is {splits.pop()}: evaluate them with `corn-drake evaluate --objects "
+              f"{args.out} --split all`")
     return 0

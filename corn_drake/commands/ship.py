@@ -2,10 +2,10 @@
 self-contained weights folder with its card.
 
     corn-drake ship --run runs/push_corn --report reports/eval_push_corn_unseen.json \
-        --library-command "corn-drake objects --num 80 --seed 0 --split unseen --out data/library_unseen" \
+        --library-command "corn-drake objects --num-objects 80 --seed 0 --split unseen --out data/library_unseen" \
         --out models/weights/push_corn
 
-OUT is what `corn-drake evaluate --run OUT` and `distill --teacher OUT` read, and nothing more:
+OUT is what `corn-drake evaluate --run OUT` and `distill --run OUT` read, and nothing more:
 
 - config.yaml: the run's config, its encoder named relative to OUT (rl/checkpoints.py
   run_encoder_path) and its object library replaced by the library command's --out;
@@ -63,7 +63,7 @@ def add_arguments(parser):
 
 
 def library_arguments(command: str) -> dict[str, str]:
-    """--num/--seed/--out/--split of a `corn-drake objects` command line; anything else is an
+    """--num-objects/--seed/--out/--split of a `corn-drake objects` command line; anything else is an
     InputError naming --library-command."""
     from corn_drake.errors import InputError
 

@@ -1,4 +1,5 @@
-"""`corn-drake train`: PPO for the teacher policy (see corn_drake/rl/ppo/trainer.py).
+"""`corn-drake train`: the teacher policy, with PPO (corn_drake/rl/ppo/trainer.py) or, for
+`--policy primitive`, TD3 (corn_drake/commands/train_primitive.py).
 
 A new run's config is built in layers (corn_drake/config/diagram_files.py and overrides.py):
 the base diagram, the `--task` overlay, then the shortcut flags and `--set KEY=VALUE`
@@ -23,7 +24,8 @@ from corn_drake.arguments.value_types import finite_float, positive_int
 from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, TRAIN_POLICIES
 
 NAME = "train"
-HELP = "train a teacher policy with PPO (resumes from OUT/checkpoints/last.pt)"
+HELP = ("train a teacher policy: PPO for --policy corn (default), state, e2e, pn, p2v-lite, rot; "
+        "TD3 for --policy primitive (resumes from OUT/checkpoints/last.pt)")
 # A new run's policy when --policy is not given: CORN, the method the project rebuilds.
 DEFAULT_POLICY = "corn"
 
@@ -55,9 +57,11 @@ def add_arguments(parser):
                              "env's sections scene/randomization/controller/task without env.; "
                              "default: none)")
     parser.add_argument("--policy", choices=TRAIN_POLICIES, default=None,
-                        help="the teacher's policy (the variants: corn_drake/rl/policy_kinds.py; "
-                             "primitive: the contact-primitive policy, trained off-policy, "
-                             "corn_drake/commands/train_primitive.py; "
+                        help="the teacher's policy and with it the algorithm: PPO trains corn, "
+                             "state, e2e, pn, p2v-lite and rot (the variants: "
+                             "corn_drake/rl/policy_kinds.py); TD3 trains primitive, the "
+                             "contact-primitive policy (off-policy, "
+                             "corn_drake/commands/train_primitive.py); "
                              f"default: {DEFAULT_POLICY} for a new run, the method the project "
                              "is named for, which needs --encoder; a resumed run keeps its own, "
                              "an --init-from run takes its source's)")

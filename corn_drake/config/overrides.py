@@ -4,6 +4,7 @@ can print it and decide whether a resumed run may take it.
 """
 
 import dataclasses as dc
+import difflib
 import json
 import types
 import typing
@@ -42,8 +43,9 @@ def resolve_key(key: str, label: str, root: Any = TrainConfig) -> tuple[str, Any
     An unknown key is an InputError naming it and the keys its section has."""
     parts = key.split(".")
     top = field_types(root) or {}
+    added = 0  # the sections added before the user's spelling (env.)
     if parts[0] not in top and ENV in top and parts[0] in (field_types(top[ENV]) or {}):
-        parts = [ENV, *parts]
+        parts, added = [ENV, *parts], 1
     schema: Any = root
     for i, part in enumerate(parts):
         if typing.get_origin(schema) in (typing.Union, types.UnionType):
@@ -56,8 +58,11 @@ def resolve_key(key: str, label: str, root: Any = TrainConfig) -> tuple[str, Any
             raise InputError(retired_message(label, ".".join(parts[:i + 1]),
                                              retired_reason(schema, part)))
         if part not in fields:
-            raise InputError(f"{label}: unknown key {'.'.join(parts[:i + 1])!r}; {parent} has "
-                             f"{', '.join(fields)}")
+            close = difflib.get_close_matches(part, list(fields), n=1, cutoff=0.6)
+            hint = (f"did you mean {'.'.join([*parts[added:i], close[0]])!r}? " if close
+                    else "")
+            raise InputError(f"{label}: unknown key {'.'.join(parts[:i + 1])!r}; {hint}{parent} "
+                             f"has {', '.join(fields)}")
         schema = fields[part]
     return ".".join(parts), schema
 

@@ -7,9 +7,15 @@ by the policy's scores over its candidate contact locations (each point takes it
 location's score) and mark the contact point it chose. Its episode runs in evaluate's own env,
 policy_env's PrimitiveEnv with the policy inside the diagram, so here too the outcome is
 evaluate's for the seed.
+
+Each episode is recorded once (EpisodeFrames: every observation's plant positions, cloud and
+colours) and then rendered at the steps asked for: the stills, and for `gallery --animate`
+every step again at a smaller size (render_frames), so the PNG and the GIF show one episode.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -17,21 +23,45 @@ from corn_drake.contract import POSITION_DIM
 from corn_drake.evaluation.episodes import policy_env, run_episode
 from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.viz.attention_view import viridis_rgb
-from corn_drake.viz.gallery import (GOAL_COLOUR, POINT_RADIUS_PX, Still, StillCamera, paint,
+from corn_drake.viz.gallery import (HEIGHT, POINT_RADIUS_PX, WIDTH, Still, StillCamera, paint,
                                     pick_steps, side_view)
 
 # The primitive policy's chosen contact point: a colour neither viridis nor the goal's red uses.
 CONTACT_COLOUR = np.array([255, 0, 255], np.uint8)
 
 
+@dataclasses.dataclass
+class Frame:
+    step: int
+    positions: np.ndarray  # the env plant's positions at this observation
+    cloud: np.ndarray  # (N, 3) world-frame cloud the policy read
+    colours: np.ndarray  # (N, 3) uint8 the cloud is painted in
+    marks: list  # (point (3,), colour (3,) uint8) drawn over everything
+
+
+@dataclasses.dataclass
+class EpisodeFrames:
+    frames: list[Frame]  # every observation of the episode, the one it ended on last
+    start: np.ndarray  # (7,) the object's initial pose
+    goal: np.ndarray  # (7,) its goal pose
+    summary: dict
+
+
 def episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middle,end"
                    ) -> tuple[list[Still], dict]:
     """Runs one episode of `agent` (mean actions) on `spec` in the env of `cfg` (a
     TeacherDiagramConfig) and renders the stills of `steps_wanted` ("start", "middle", "end",
-    or step numbers). Returns (stills, episode summary). A contact-primitive agent's episode
-    goes to primitive_episode_stills."""
+    or step numbers). Returns (stills, episode summary)."""
+    episode = record_episode(agent, cfg, spec, seed)
+    picks = pick_steps(steps_wanted, len(episode.frames))
+    return render_frames(episode, cfg.scene, spec, picks), episode.summary
+
+
+def record_episode(agent, cfg, spec, seed: int) -> EpisodeFrames:
+    """One episode of `agent` (mean actions) run by evaluate's episode runner, every
+    observation kept. A contact-primitive agent's goes to record_primitive_episode."""
     if getattr(agent, "kind", None) == "primitive":
-        return primitive_episode_stills(agent, cfg, spec, seed, steps_wanted)
+        return record_primitive_episode(agent, cfg, spec, seed)
     env = TeacherEnv(cfg, spec)
     frames = []  # (step, plant positions, cloud, point scores) of every observation
 
@@ -44,15 +74,27 @@ def episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middl
     # evaluate's own episode runner, so the outcome is the one evaluate reports for this seed.
     result = run_episode(env, act_and_keep, seed=seed)
     act_and_keep(env._observation())  # the observation the episode ended on: the "end" still
-    picks = pick_steps(steps_wanted, len(frames))
-    start, goal = env.episode.initial_object_pose[:3], env.episode.goal_pose[:3]
-    camera = StillCamera(cfg.scene, spec, *side_view(start, goal))
+    return EpisodeFrames([Frame(step, positions, cloud, viridis_rgb(scores), [])
+                          for step, positions, cloud, scores in frames],
+                         np.array(env.episode.initial_object_pose, float),
+                         np.array(env.episode.goal_pose, float), _summary(seed, result))
+
+
+def render_frames(episode: EpisodeFrames, scene_cfg, spec, picks: list[int],
+                  width: int = WIDTH, height: int = HEIGHT) -> list[Still]:
+    """The frames `picks` of `episode` rendered from the side of its push (side_view), each
+    with the goal copy of the object, the cloud painted and its marks drawn. Points shrink with
+    the picture so a small animation frame is not covered by them."""
+    camera = StillCamera(scene_cfg, spec, *side_view(episode.start, episode.goal, spec.radius),
+                         width=width, height=height)
+    radius = max(1, round(POINT_RADIUS_PX * height / HEIGHT))
     stills = []
     for k in picks:
-        step, positions, cloud, scores = frames[k]
-        image, painted = _painted_still(camera, positions, cloud, viridis_rgb(scores), goal)
-        stills.append(Still(step, image, painted))
-    return stills, _summary(seed, result)
+        f = episode.frames[k]
+        image, painted = _painted_still(camera, f.positions, f.cloud, f.colours, episode.goal,
+                                        f.marks, radius)
+        stills.append(Still(f.step, image, painted))
+    return stills
 
 
 def _summary(seed: int, result) -> dict:
@@ -60,16 +102,18 @@ def _summary(seed: int, result) -> dict:
             "position_error": result.status.get("position_error")}
 
 
-def _painted_still(camera, positions, cloud, colours, goal, marks=()) -> tuple[np.ndarray, int]:
-    """The render of `positions` with the visible cloud points in `colours`, then the goal (red)
-    and each (point, colour) of `marks` drawn over everything. Returns (image, points painted)."""
-    rgb, depth = camera.render(positions)
+def _painted_still(camera, positions, cloud, colours, goal_pose, marks=(),
+                   radius: int = POINT_RADIUS_PX) -> tuple[np.ndarray, int]:
+    """The render of `positions` with the goal copy of the object (goal_pose (7,)), the
+    visible cloud points in `colours`, then each (point, colour) of `marks` drawn over
+    everything. Returns (image, points painted)."""
+    rgb, depth = camera.render_with_goal(positions, goal_pose)
     pixels, z = camera.project(cloud)
-    image, painted = paint(rgb, depth, pixels, z, colours)
-    for point, colour in ((goal, GOAL_COLOUR), *marks):
+    image, painted = paint(rgb, depth, pixels, z, colours, radius=radius)
+    for point, colour in marks:
         pixel, point_z = camera.project(np.asarray(point, float)[None])
         image, _ = paint(image, np.full(depth.shape, np.inf), pixel, point_z, colour[None],
-                         radius=2 * POINT_RADIUS_PX)
+                         radius=2 * radius)
     return image, painted
 
 
@@ -112,10 +156,9 @@ def location_colours(cloud: np.ndarray, choice: dict | None) -> np.ndarray:
     return viridis_rgb(relative[nearest])
 
 
-def primitive_episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "start,middle,end"
-                             ) -> tuple[list[Still], dict]:
-    """episode_stills for a contact-primitive agent: one episode in evaluate's env (policy_env:
-    the policy inside the diagram, one env step per policy period), each still's cloud coloured
+def record_primitive_episode(agent, cfg, spec, seed: int) -> EpisodeFrames:
+    """record_episode for a contact-primitive agent: one episode in evaluate's env (policy_env:
+    the policy inside the diagram, one env step per policy period), each frame's cloud coloured
     by the scores of the choice it shows (_DecisionLog.shown_at) and that choice's contact point
     marked in magenta. The summary adds `primitives`, the primitives the episode ran."""
     from corn_drake.rl.envs.primitive_env import STATUS_LAYOUT
@@ -147,15 +190,11 @@ def primitive_episode_stills(agent, cfg, spec, seed: int, steps_wanted: str = "s
     env.reset = reset_and_keep
     result = run_episode(env, None, seed=seed)
     primitives = int(round(env.executor_status()[STATUS_LAYOUT["count"]]))
-    picks = pick_steps(steps_wanted, len(frames))
-    start, goal = env.episode.initial_object_pose[:3], env.episode.goal_pose[:3]
-    camera = StillCamera(cfg.scene, spec, *side_view(start, goal))
-    stills = []
-    for k in picks:
-        step, positions, cloud = frames[k]
+    kept = []
+    for k, (step, positions, cloud) in enumerate(frames):
         choice = log.shown_at(k)
         marks = [] if choice is None else [(cloud[choice["point"]], CONTACT_COLOUR)]
-        image, painted = _painted_still(camera, positions, cloud,
-                                        location_colours(cloud, choice), goal, marks)
-        stills.append(Still(step, image, painted))
-    return stills, {**_summary(seed, result), "primitives": primitives}
+        kept.append(Frame(step, positions, cloud, location_colours(cloud, choice), marks))
+    return EpisodeFrames(kept, np.array(env.episode.initial_object_pose, float),
+                         np.array(env.episode.goal_pose, float),
+                         {**_summary(seed, result), "primitives": primitives})

@@ -256,6 +256,8 @@ class DaggerTrainer:
                    "final": self.history[-1] if self.history else {},
                    "episodes_per_object": dict(sorted(self.episodes_per_object.items())),
                    "history": self.history}
+        if hasattr(self.envs, "record"):  # Ray workers: where they ran, what died and why
+            metrics.update(self.envs.record.report())
         write_json(self.out / "metrics.json", metrics)
         plot_distill_curves(self.history, self.out / "plots" / "learning_curve.png")
         return metrics

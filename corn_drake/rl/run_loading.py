@@ -19,6 +19,8 @@ from typing import Any
 
 # Reference controllers `--run` accepts in place of a run folder (rl/scripted.py).
 REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
+# The privileged planning policy (rl/planner/): no run folder, its budget is `--set planner.*`.
+PLANNER = "planner"
 
 
 @dataclass
@@ -49,6 +51,8 @@ class LoadedRun:
         `ship` compares env_steps and checkpoint with the weights it packs."""
         if self.kind == "reference":
             return {}
+        if self.kind == "planner":
+            return self.agent.describe() if self.agent is not None else {}
         fields = {"env_steps": self.env_steps}
         if self.kind == "primitive":  # one decision each, many policy periods
             fields["env_steps_unit"] = "primitives"
@@ -78,6 +82,17 @@ class LoadedRun:
             base = TrainConfig(env=load_teacher_config(task))
             run_cfg = apply_sets(base, sets, only="env")
             self.agent = getattr(scripted, REFERENCES[self.run])(run_cfg.env.controller)
+        elif self.kind == "planner":
+            from corn_drake.config.diagram_files import load_primitive_env_config
+            from corn_drake.rl.planner.search import (PlannerPolicy, planner_settings,
+                                                      primitive_config)
+
+            # planner.* and primitive.* are the planner's; the rest change the env, whose
+            # default task is the paper's 6D task on the primitive policies' env layer.
+            planner, primitive, rest = planner_settings(sets)
+            base = TrainConfig(env=load_primitive_env_config(task or "full6d"))
+            run_cfg = apply_sets(base, rest, only="env")
+            self.agent = PlannerPolicy(planner, primitive_config(primitive))
         elif self.kind == "primitive":
             base = self.config
             run_cfg = primitive_run_on(base, task, sets)
@@ -115,6 +130,8 @@ def run_kind_of(run: str, references: bool = True) -> str:
         return run_kind(run)
     if run in REFERENCES:
         return "reference"
+    if run == PLANNER:
+        return "planner"
     return run_kind(run, or_else=f"a reference ({', '.join(REFERENCES)})")
 
 
@@ -129,7 +146,7 @@ def load_any_run(run: str, checkpoint: str = "", references: bool = True) -> Loa
     if checkpoint and kind not in ("train", "primitive"):
         raise InputError(f"--checkpoint {checkpoint} picks one of a teacher run's kept "
                          f"checkpoints; --run {run} is not a `corn-drake train` run")
-    if kind == "reference":
+    if kind in ("reference", "planner"):
         return LoadedRun(kind, run, None, None, run)
     if kind == "distill":
         from corn_drake.rl.checkpoints import load_student_run_with_step

@@ -149,19 +149,22 @@ def read_recorded_arguments(folder: str | os.PathLike) -> dict | None:
 
 def resume_arguments(folder: str | os.PathLike, requested: Mapping[str, Any], *,
                      may_grow: Iterable[str] = (),
-                     legacy: Callable[[Path], Mapping[str, Any] | None] | None = None) -> None:
+                     legacy: Callable[[Path], Mapping[str, Any] | None] | None = None,
+                     renamed: Mapping[str, str] | None = None) -> None:
     """Refuses if `folder` was made with other values of the arguments that define its output
     (`requested`, keyed by option name); otherwise records them in FOLDER/arguments.json before
     any work, so even a killed job leaves its record.
 
     `legacy(folder)` recovers the arguments of a folder made before the record was kept (from
-    its manifest, say), or returns None when nothing says.
+    its manifest, say), or returns None when nothing says. `renamed` maps an option's old
+    spelling, as an older record may hold it, to its current one.
     """
     folder = Path(folder)
     recorded = read_recorded_arguments(folder)
     if recorded is None and legacy is not None:
         recorded = legacy(folder)
     if recorded is not None:
+        recorded = {(renamed or {}).get(k, k): v for k, v in recorded.items()}
         refuse_changed_arguments(folder, recorded, requested, may_grow=may_grow)
     write_json(folder / ARGUMENTS_NAME, dict(requested))
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Outcome data on the lent 16-core machine (docs/results/primitive/README.md, item 38): a larger
+# Outcome data on the lent 16-core machine (experiments/primitive_policy/LOG.md, item 38): a larger
 # procedural training library (seed 1, the train split of an 800-object build, 64 drops per
 # object: what 210 s of 16 processes build, 190 objects there) and lookahead outcome data on it
 # (16 processes of `corn-drake collect-outcomes` with the shipped push_turn policy, at rest,
@@ -26,7 +26,7 @@ OBJ_S=${OBJ_S:-210}; COL_END=${COL_END:-485}
 el "cores $(nproc)"
 mkdir -p $COL $OUT
 timeout -k 15 $OBJ_S python3 -c 'import sys; from corn_drake.cli import main; sys.exit(main())' \
-  objects --num 800 --seed 1 --split train --drops 64 --workers 16 --out $LIB --no-progress \
+  objects --num-objects 800 --seed 1 --split train --drops 64 --workers 16 --out $LIB --no-progress \
   > $OUT/objects.log 2>&1
 el "objects rc=$?"; tail -3 $OUT/objects.log
 N=$(python3 -c "from corn_drake.assets.library import list_objects; print(len(list_objects('$LIB','train')))")

@@ -1,6 +1,6 @@
 """Can the primitives do the task at all? A one-step lookahead with the simulator as its model
 (corn_drake/rl/primitive/outcome/lookahead.py) against the learned policy's greedy choices, on the first
-episodes of `evaluate`'s unseen-object episodes: docs/results/primitive/README.md's items 33, 40.
+episodes of `evaluate`'s unseen-object episodes: experiments/primitive_policy/LOG.md's items 33, 40.
 
     .venv/bin/python -m experiments.primitive_outcomes.lookahead_oracle \
         models/weights/push_turn_primitive \

@@ -1,4 +1,4 @@
-"""Which inputs carry an outcome model to objects it never saw? docs/results/primitive/README.md's item 40.
+"""Which inputs carry an outcome model to objects it never saw? experiments/primitive_policy/LOG.md's item 40.
 
     .venv/bin/python -m experiments.primitive_outcomes.outcome_inputs \
         models/weights/push_turn_primitive --data runs/big_collect --holdout-objects 30 \

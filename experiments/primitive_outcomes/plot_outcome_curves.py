@@ -1,5 +1,5 @@
 """Draws outcome_curves.png, the learning curves of the shipped full6d policy
-(`models/weights/full6d_outcome`, docs/results/primitive/README.md's item 40): its outcome model's fit (the Huber loss
+(`models/weights/full6d_outcome`, experiments/primitive_policy/LOG.md's item 40): its outcome model's fit (the Huber loss
 of the batches, from the folder's training_history.json) and success on the 200 unseen episodes
 against the training objects the model was fitted on, every fit seed a point.
 
@@ -42,7 +42,7 @@ def rates(paths: list[Path]) -> list[float]:
     """The reports' success rates, or SystemExit naming the first report missing."""
     missing = [p.name for p in paths if not p.is_file()]
     if missing:
-        raise SystemExit(f"plot_outcome_curves.py: {missing[0]} is missing (docs/results/primitive/README.md's "
+        raise SystemExit(f"plot_outcome_curves.py: {missing[0]} is missing (experiments/primitive_policy/LOG.md's "
                          "item 40 commands make it)")
     return [json.loads(p.read_text())["success_rate"] for p in paths]
 

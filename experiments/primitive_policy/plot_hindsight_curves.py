@@ -1,5 +1,5 @@
 """Draws hindsight_curves.png: training success of the push_turn and full6d runs started from the
-push policy, with hindsight goals (items 13-18 of docs/results/primitive/README.md) and without (the table's rows); and
+push policy, with hindsight goals (items 13-18 of experiments/primitive_policy/LOG.md) and without (the table's rows); and
 variant_curves.png: the variants of the low-push hindsight run on push_turn (items 19-23, 27, 30).
 
     .venv/bin/python -m experiments.primitive_policy.plot_hindsight_curves

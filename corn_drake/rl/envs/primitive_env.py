@@ -143,7 +143,7 @@ class PrimitiveEnv(DiagramEnv):
         obs = self._observation()
         status = obs["executor"]
         sequence = int(round(status[STATUS_LAYOUT["count"]])) + 1
-        aim, normal = push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
+        aim, normal = self._aim(obs, point)
         primitive = make_primitive(aim, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
         distance_before = self.keypoint_distance()
@@ -175,6 +175,11 @@ class PrimitiveEnv(DiagramEnv):
         if info["status"]["success"] > 0:
             reward += self.cfg.task.success_reward
         return obs, reward, terminated, truncated, info
+
+    def _aim(self, obs: dict, point: int) -> tuple[np.ndarray, np.ndarray]:
+        """(point, normal) the primitive aims at for cloud point `point`: low_push's choice
+        (a planner's topple, rl/planner/search.py, aims exactly instead)."""
+        return push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
 
     def _success_waits(self, info: dict) -> bool:
         """Whether a success mid-primitive waits for the primitive's end (success_at_rest), the

@@ -53,7 +53,14 @@ def library_train_ids(library: str) -> list[str]:
 
     ids = list_objects(library, "train")
     if not ids:
-        raise InputError(f"object library {library} has no train objects")
+        from corn_drake.assets.manifest import read_manifest
+
+        held = [o.id for o in read_manifest(library).objects]
+        hint = (f" (its {len(held)} objects are all unseen; an ingested folder of a few meshes "
+                "has no train ones): train on one of them with --set "
+                "scene.object.library_objects=one --set scene.object.object_id="
+                f"{held[0]}, or evaluate them with `evaluate --split all`") if held else ""
+        raise InputError(f"object library {library} has no train objects{hint}")
     for object_id in ids:
         load_object_spec(library, object_id)
     return ids

@@ -239,6 +239,8 @@ class Trainer:
                    "updates": self.update_index, "final": self.history[-1] if self.history else {},
                    "episodes_per_object": dict(sorted(self.episodes_per_object.items())),
                    "history": self.history}
+        if hasattr(self.rollouts, "record"):  # Ray workers: where they ran, what died and why
+            metrics.update(self.rollouts.record.report())
         write_json(self.out / "metrics.json", metrics)
         plot_learning_curves({cfg.policy: self.history}, self.out / "plots" / "learning_curve.png")
         return metrics

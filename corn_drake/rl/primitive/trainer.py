@@ -243,13 +243,15 @@ class PrimitiveTrainer:
                 last_checkpoint = self.global_step // cfg.checkpoint_every
                 self._save()
         self._save()
-        if self.workers is not None:
+        where = {}
+        if self.workers is not None:  # where the workers ran, what died and why
+            where = self.workers.record.report()
             self.workers.close()
         writer.close()
         bar.close()
         metrics = {"policy": cfg.policy, "global_step": self.global_step,
                    "episodes": self.episodes, "final": self.history[-1] if self.history else {},
-                   "history": self.history}
+                   "history": self.history, **where}
         write_json(self.out / "metrics.json", metrics)
         if self.history:
             plot_learning_curves({cfg.policy: self.history},

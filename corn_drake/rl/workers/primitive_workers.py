@@ -16,7 +16,9 @@ run is not repeatable step for step (the in-process path is).
 A worker that dies is replaced by a fresh one with the same envs and a fresh random stream,
 which collects the lost request again (its rounds, not its exact primitives: new episodes, new
 draws); `restarts` counts it. More than MAX_REPLACEMENTS replacements in a row without a
-request coming back means the fault is not the worker's, and the run fails.
+request coming back means the fault is not the worker's, and the run fails. Each replacement
+says in one line which worker, where and why; a lost node's workers come back on the nodes left,
+or the run stops with one line when they have no room (rl/workers/cluster.py).
 """
 
 from __future__ import annotations
@@ -34,17 +36,21 @@ from corn_drake.rl.primitive.collection import (
     PrimitiveTransitions,
 )
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.workers import cluster
+from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
+                                           spawn_replacement, worker_cpus, worker_options)
 
 MAX_REPLACEMENTS = 3
 
 
 @ray.remote(num_cpus=1)
-class PrimitiveWorker:
+class PrimitiveWorker(WorkerBase):
     def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent,
-                 seed: list[int], hindsight: HindsightRule | None = None):
+                 seed: list[int], hindsight: HindsightRule | None = None, library=None):
         import torch
 
         torch.set_num_threads(1)  # its inference must not spread threads over the other workers
+        factory = arrive(factory, library)  # the library as this node holds it
         self.collector = PrimitiveCollector(EnvBatch(factory, num_envs, first_index), agent,
                                             hindsight=hindsight)
         self.rng = np.random.default_rng(seed)
@@ -53,11 +59,6 @@ class PrimitiveWorker:
                 exploration: Exploration) -> PrimitiveTransitions:
         self.collector.set_weights(state, version)
         return self.collector.collect(rounds, exploration, self.rng)
-
-    def pid(self) -> int:
-        import os
-
-        return os.getpid()
 
 
 class RayPrimitiveCollectors:
@@ -73,8 +74,14 @@ class RayPrimitiveCollectors:
         self._seed, self._start_step = int(seed), int(start_step)
         # The networks' architecture and the encoder travel once, at spawn.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
+        # The library's files too (once, read here): no node needs the driver's filesystem.
+        self._library = ray.put(cluster.pack_library(factory))
+        self.cpus = worker_cpus(num_workers)
+        check_room(num_workers, self.cpus, "primitive workers")
         self._spawns = [0] * num_workers
         self.workers = [self._spawn(w) for w in range(num_workers)]
+        self.record = WorkerRecord("primitive")
+        self.record.placed(self.workers, self.cpus)
         self.restarts = 0
         self.version, self._weights = None, None
         self._pending: dict = {}  # future -> (worker index, rounds, exploration): to resend
@@ -83,10 +90,9 @@ class RayPrimitiveCollectors:
     def _spawn(self, w: int):
         seed = [self._seed, w, self._spawns[w], self._start_step]
         self._spawns[w] += 1
-        # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
-        return PrimitiveWorker.options(num_cpus=0).remote(
+        return PrimitiveWorker.options(**worker_options(self.cpus)).remote(
             self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent, seed,
-            self.hindsight)
+            self.hindsight, self._library)
 
     def publish(self, agent, version: int) -> None:
         """Puts `agent`'s actor and critic (after update `version`) into the object store, once
@@ -115,13 +121,15 @@ class RayPrimitiveCollectors:
             w, rounds, exploration = self._pending.pop(future)
             try:
                 result = ray.get(future)
-            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError):
+            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError) as e:
                 self._replaced_in_a_row += 1
                 if self._replaced_in_a_row > MAX_REPLACEMENTS:
                     raise RuntimeError(f"primitive workers died {self._replaced_in_a_row} times "
                                        f"in a row without returning a round") from None
                 self.restarts += 1
-                self.workers[w] = self._spawn(w)
+                spawn_replacement(self.record, self.workers, w, self.cpus,
+                                  lambda: self._spawn(w))
+                self.record.replaced(w, e, self.workers[w], "sending its request again")
                 self.submit(w, rounds, exploration)
                 continue
             self._replaced_in_a_row = 0

@@ -3,7 +3,8 @@
 RayEnvBatch looks like EnvBatch (reset / step over all envs of all workers, concatenated). A worker
 that dies (process killed, node lost) is replaced by a fresh actor with the same envs; its envs
 start new episodes, the step reports them as truncated with no bootstrap (final_obs absent), and
-`restarts` counts it — the run goes on.
+`restarts` counts it, one line saying which worker, where and why (rl/workers/cluster.py) — the
+run goes on.
 """
 
 from __future__ import annotations
@@ -17,14 +18,18 @@ import numpy as np
 import ray
 
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
+from corn_drake.rl.workers import cluster
+from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
+                                           spawn_replacement, worker_cpus, worker_options)
 
 
 @ray.remote(num_cpus=1)
-class RolloutWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int):
+class RolloutWorker(WorkerBase):
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, library=None):
         import torch
 
         torch.set_num_threads(1)  # its inference must not spread threads over the other workers
+        factory = arrive(factory, library)  # the library as this node holds it
         self.batch = EnvBatch(factory, num_envs, first_index)
 
     def reset(self):
@@ -33,28 +38,34 @@ class RolloutWorker:
     def step(self, actions: np.ndarray) -> StepResult:
         return self.batch.step(actions)
 
-    def pid(self) -> int:
-        import os
-
-        return os.getpid()
-
 
 def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
-    """Local Ray by default, a cluster with `address`; no dashboard (nothing to serve here).
+    """A Ray of this process's own by default (`num_cpus`, else the CPUs this process may use),
+    never a cluster it did not name; the cluster at `address` with it. No dashboard (nothing to
+    serve here).
 
     A local Ray's processes end with this process, however it ends: see ray_reaper.py. (Ray
     2.x starts its DashboardAgent and RuntimeEnvAgent even without the dashboard; there is no
     switch to keep them away, so the reaper ends them.)
     """
+    from corn_drake.nn.threads import usable_cpus
+
     if ray.is_initialized():
         return
     with _signals_held_during_start():
         if address:
             ray.init(address=address, log_to_driver=False)
+            cluster.joined_cluster = True
             return
         before = _child_pids()
         with _ray_processes_in_their_own_session():
-            ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+            # address="local": a Ray of our own, whatever cluster this machine started or left
+            # behind. Without it ray.init joins the cluster named by RAY_ADDRESS or by Ray's
+            # current-cluster file (left there after `ray start`, even once stopped): a local
+            # run then ran on someone's cluster, or failed on num_cpus (issue 56).
+            ray.init(address="local", num_cpus=num_cpus or usable_cpus(),
+                     include_dashboard=False, log_to_driver=False)
+        cluster.joined_cluster = False
         _start_reaper(sorted(_child_pids() - before))
 
 
@@ -144,13 +155,18 @@ class RayEnvBatch:
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
         self.factory, self.envs_per_worker = factory, envs_per_worker
+        # The library's files (once, read here): no node needs the driver's filesystem.
+        self._library = ray.put(cluster.pack_library(factory))
+        self.cpus = worker_cpus(num_workers)
+        check_room(num_workers, self.cpus, "rollout workers")
         self.workers = [self._spawn(w) for w in range(num_workers)]
+        self.record = WorkerRecord("rollout")
+        self.record.placed(self.workers, self.cpus)
         self.restarts = 0
 
     def _spawn(self, w: int):
-        # num_cpus=0 on the actor handle: we may run more workers than cores (one-core machines).
-        return RolloutWorker.options(num_cpus=0).remote(self.factory, self.envs_per_worker,
-                                                        w * self.envs_per_worker)
+        return RolloutWorker.options(**worker_options(self.cpus)).remote(
+            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._library)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker
@@ -166,13 +182,14 @@ class RayEnvBatch:
         for i, future in enumerate(futures):
             try:
                 results.append(ray.get(future))
-            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError):
-                results.append(self._replace(i))
+            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError) as e:
+                results.append(self._replace(i, e))
         return _concat(results, E)
 
-    def _replace(self, i: int) -> StepResult:
+    def _replace(self, i: int, error: Exception) -> StepResult:
         self.restarts += 1
-        self.workers[i] = self._spawn(i)
+        spawn_replacement(self.record, self.workers, i, self.cpus, lambda: self._spawn(i))
+        self.record.replaced(i, error, self.workers[i], "its envs starting new episodes")
         obs = ray.get(self.workers[i].reset.remote())
         E = self.envs_per_worker
         return StepResult(obs, np.zeros(E), np.zeros(E, bool), np.ones(E, bool), {}, [],

@@ -12,7 +12,9 @@ PPO stays on-policy: a segment carries the update whose weights it acted with, a
 refuses one from another update. A worker that dies (process killed, node lost) is replaced by
 a fresh one with the same envs (new episodes from their first), which collects the dead
 worker's segment again with the same weights and noise: the update loses nothing, `restarts`
-counts it.
+counts it, and one line says which worker, where, and why (rl/workers/cluster.py). A node lost
+mid-run is the same: its workers come back on the nodes left; when those have no room, the run
+stops with one line (NoRoomForWorkers) and its last checkpoint as it was.
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ import ray
 
 from corn_drake.rl.ppo.segments import Segment, SegmentCollector, concat_segments
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
+                                           spawn_replacement, worker_cpus, worker_options)
+from corn_drake.rl.workers import cluster
 
 # A worker replaced this many times within one update's collection means the fault is not the
 # worker's (a segment that always kills its process): the update fails instead of looping.
@@ -32,11 +37,12 @@ MAX_REPLACEMENTS_PER_UPDATE = 3
 
 
 @ray.remote(num_cpus=1)
-class SegmentWorker:
-    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent):
+class SegmentWorker(WorkerBase):
+    def __init__(self, factory: EnvFactory, num_envs: int, first_index: int, agent, library):
         import torch
 
         torch.set_num_threads(1)  # its inference must not spread threads over the other workers
+        factory = arrive(factory, library)  # the library as this node holds it
         self.collector = SegmentCollector(EnvBatch(factory, num_envs, first_index), agent, "cpu")
 
     def collect(self, state: dict, version: int, noise: np.ndarray) -> Segment:
@@ -45,11 +51,6 @@ class SegmentWorker:
 
     def version(self) -> int:
         return self.collector.version
-
-    def pid(self) -> int:
-        import os
-
-        return os.getpid()
 
 
 class RaySegmentCollectors:
@@ -62,15 +63,21 @@ class RaySegmentCollectors:
         self.factory, self.envs_per_worker = factory, envs_per_worker
         # The agent's architecture travels once, at spawn; weights come with every update.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
+        # The library's files too (once, read here): no node needs the driver's filesystem.
+        self._library = ray.put(cluster.pack_library(factory))
+        self.cpus = worker_cpus(num_workers)
+        check_room(num_workers, self.cpus, "rollout workers")
         self.workers = [self._spawn(w) for w in range(num_workers)]
+        self.record = WorkerRecord("rollout")
+        self.record.placed(self.workers, self.cpus)
         self.restarts = 0
         self.version = None  # the update whose weights are in the object store
         self._weights = None
 
     def _spawn(self, w: int):
-        # num_cpus=0 on the actor: we may run more workers than cores (one-core machines).
-        return SegmentWorker.options(num_cpus=0).remote(
-            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent)
+        return SegmentWorker.options(**worker_options(self.cpus)).remote(
+            self.factory, self.envs_per_worker, w * self.envs_per_worker, self._agent,
+            self._library)
 
     def __len__(self) -> int:
         return len(self.workers) * self.envs_per_worker
@@ -97,13 +104,16 @@ class RaySegmentCollectors:
                 try:
                     parts.append(ray.get(future))
                     break
-                except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError):
+                except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError) as e:
                     replaced += 1
                     if replaced > MAX_REPLACEMENTS_PER_UPDATE:
                         raise RuntimeError(f"rollout workers died {replaced} times collecting "
                                            f"update {self.version}'s segments") from None
                     self.restarts += 1
-                    self.workers[i] = self._spawn(i)
+                    spawn_replacement(self.record, self.workers, i, self.cpus,
+                                      lambda: self._spawn(i))
+                    self.record.replaced(i, e, self.workers[i],
+                                         f"collecting update {self.version}'s segment again")
                     future = self.workers[i].collect.remote(self._weights, self.version,
                                                             columns[i])
         return concat_segments(parts)

@@ -1,0 +1,37 @@
+"""`corn-drake merge-reports`: one planner report from the parts that split runs played.
+
+`evaluate --run planner --episodes-from A --episodes B --report PART` plays episodes A..B-1 and
+keeps them in PART's rows file (PART with .rows.jsonl for .json); several such parts, run in
+other processes, sessions or machines, are merged here into the report of all their episodes,
+after checking that they share every setting and play no episode twice.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+NAME = "merge-reports"
+HELP = "merge the rows files of a planner evaluation split by episode range into one report"
+
+
+def add_arguments(parser):
+    parser.add_argument("parts", nargs="+", type=Path, metavar="ROWS",
+                        help="the parts' REPORT.rows.jsonl files (written by `evaluate --run "
+                             "planner --episodes-from ...`)")
+    parser.add_argument("--report", required=True, type=Path,
+                        help="the merged report (its rows file is written beside it)")
+
+
+def run(args) -> int:
+    from corn_drake.errors import InputError
+    from corn_drake.evaluation.planner_episodes import merge_reports
+
+    if args.report.resolve() in {p.resolve() for p in args.parts} or args.report.with_name(
+            args.report.stem + ".rows.jsonl").resolve() in {p.resolve() for p in args.parts}:
+        raise InputError(f"--report {args.report}: would overwrite one of its parts")
+    report = merge_reports(args.parts, args.report)
+    interval = report["success_wilson_95"]
+    print(f"{len(report['episodes'])} episodes from {len(args.parts)} parts: success "
+          f"{report['success_rate']:.3f}" + (f" (95 % {interval[0]:.3f}-{interval[1]:.3f})"
+                                              if interval else "") + f"; report {args.report}")
+    return 0

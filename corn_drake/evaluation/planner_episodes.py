@@ -1,0 +1,233 @@
+"""`corn-drake evaluate --run planner`: the planning policy (rl/planner/) on evaluate's fixed
+episodes, resumable and splittable by episode range.
+
+Episode k is evaluate's episode k (its object ids[k % len(ids)], seeded episode_seed(seed,
+object, k // len(ids)), the env's seed the base seed as policy_env sets it), so a planner report
+compares row by row with any policy's. Each finished episode is appended at once as one JSON
+line to REPORT.rows.jsonl (its first line: the settings); a rerun with the same settings skips
+the episodes already there, and `--episodes-from A --episodes N` plays only k in [A, N), so the
+200 episodes can be spread over processes writing different reports (their rows files
+concatenate). The report is rewritten after every episode.
+
+Each row adds to evaluate's: the planner's decisions (simulated primitives and CPU seconds
+each, the kinds chosen) and HACMan's criterion beside the task's success (`hacman_success`: the
+mean distance between the object's cloud points at the end and at the goal under 3 cm, the
+object at rest).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from corn_drake.config.primitive import at_rest
+from corn_drake.errors import InputError
+from corn_drake.evaluation.episodes import episode_seed
+from corn_drake.evaluation.failures import (failure_category, failure_counts, motion_summary,
+                                            successes_ending_still)
+from corn_drake.storage.atomic_files import write_json, write_text
+from corn_drake.transforms import quat_wxyz_to_matrix
+
+HACMAN_DISTANCE_M = 0.03
+
+
+def cloud_distance(cloud_world: np.ndarray, pose, goal) -> float:
+    """Mean distance (m) between the object's points where they are (`cloud_world`, taken at
+    `pose`) and where they would be at `goal` (HACMan's success measure)."""
+    pose, goal = np.asarray(pose, float), np.asarray(goal, float)
+    R, Rg = quat_wxyz_to_matrix(pose[3:]), quat_wxyz_to_matrix(goal[3:])
+    body = (np.asarray(cloud_world, float) - pose[:3]) @ R
+    return float(np.linalg.norm(body @ Rg.T + goal[:3] - cloud_world, axis=1).mean())
+
+
+def play(env, planner, seed: int) -> dict:
+    """One episode of `planner` on `env` (a PlannerEnv) from its start; the report row."""
+    obs, info = env.reset(seed=seed)
+    planner.reset()
+    start = env.object_pose()
+    status, sim_error, started = info["status"], None, time.process_time()
+    while True:
+        obs, _, terminated, truncated, info = planner.act(env)
+        status, sim_error = info.get("status", status), info.get("sim_error")
+        if terminated or truncated:
+            break
+    end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
+    decisions = planner.decisions
+    distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
+    row = {"success": bool(status.get("success", 0) > 0), "steps": int(env._steps),
+           "primitives": len(decisions),
+           "position_error": status.get("position_error"),
+           "orientation_error": status.get("orientation_error"), "sim_error": sim_error,
+           "out_of_workspace": bool(status.get("out_of_workspace", 0) > 0),
+           "motion": motion_summary(start, end, goal), "end_speed": env.object_speed(),
+           "hacman_distance": distance,
+           "hacman_success": bool(distance is not None and distance < HACMAN_DISTANCE_M
+                                  and at_rest(env.object_speed())),
+           "kinds_chosen": dict(Counter(d["kind"] for d in decisions)),
+           "simulated": int(sum(d["simulated"] for d in decisions)),
+           "cpu_seconds": float(time.process_time() - started),
+           "decisions": decisions}
+    row["failure"] = failure_category(row, env.teacher_cfg.task)
+    return row
+
+
+def _read_rows(path: Path, settings: dict | None) -> list[dict]:
+    """The episode rows of `path` written with `settings` (None: whichever it names; read
+    `settings_of` for them). A last line that a kill cut short is dropped from the file: every
+    line before it is a whole episode."""
+    if not path.exists():
+        return []
+    lines = path.read_text().splitlines()
+    records = []
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            if i != len(lines) - 1:
+                raise InputError(f"{path}: line {i + 1} is not a JSON row; the file is damaged"
+                                 ) from None
+            write_text(path, "".join(f"{json.dumps(r)}\n" for r in records))
+    if not records or "settings" not in records[0]:
+        raise InputError(f"{path}: not a planner rows file (its first line names no settings)")
+    if settings is not None and records[0]["settings"] != settings:
+        raise InputError(f"{path} holds another planner evaluation's rows (other settings); "
+                         "choose another --report")
+    return records[1:]
+
+
+def settings_of(path: Path) -> dict:
+    lines = path.read_text().splitlines() if path.is_file() else []
+    if not lines:
+        raise InputError(f"{path}: no such planner rows file")
+    try:
+        return json.loads(lines[0])["settings"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise InputError(f"{path}: not a planner rows file (its first line names no settings)"
+                         ) from None
+
+
+def merge_reports(parts: list[Path], out: Path) -> dict:
+    """One report of the episodes that split runs (`--episodes-from`) played: `parts` are their
+    REPORT.rows.jsonl files, which must share every setting and may not play an episode twice.
+    Written to `out` (and its own rows file) atomically; returns the report."""
+    from corn_drake.config.diagram_files import load_primitive_env_config
+
+    settings = settings_of(parts[0])
+    rows, seen = [], {}
+    for part in parts:
+        if settings_of(part) != settings:
+            raise InputError(f"{part}: its settings differ from {parts[0]}'s; only parts of one "
+                             "evaluation merge")
+        for row in _read_rows(part, settings):
+            if row["episode"] in seen:
+                raise InputError(f"episode {row['episode']} is in both {seen[row['episode']]} "
+                                 f"and {part}")
+            seen[row["episode"]] = part
+            rows.append(row)
+    rows.sort(key=lambda r: r["episode"])
+    facts = {k: v for k, v in settings.items() if k not in ("task", "seed", "objects")}
+    episodes = range(rows[0]["episode"], rows[-1]["episode"] + 1) if rows else range(0)
+    report = report_of(rows, load_primitive_env_config(settings["task"]).task, episodes, facts)
+    report.update({"run": "planner", "policy": "planner", "seed": settings["seed"],
+                   "parts": [str(p) for p in parts]})
+    write_text(out.with_name(out.stem + ".rows.jsonl"),
+               "".join(f"{json.dumps(r)}\n" for r in [{"settings": settings}, *rows]))
+    write_json(out, report)
+    return report
+
+
+def _append(path: Path, record: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(record) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def report_of(rows: list[dict], task, requested: range, facts: dict) -> dict:
+    per_object = defaultdict(list)
+    for r in rows:
+        per_object[r["object"]].append(r["success"])
+    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
+    decisions = [d for r in rows for d in r["decisions"]]
+    n, k = len(rows), sum(r["success"] for r in rows)
+    return {"task": task.name, **facts,
+            "success_rate": float(k / n) if n else None,
+            "success_wilson_95": wilson(k, n),
+            "hacman_success_rate": float(np.mean([r["hacman_success"] for r in rows]))
+            if n else None,
+            "balanced_success_rate": float(np.mean(list(rates.values()))) if rates else None,
+            "per_object": rates,
+            "mean_episode_length": float(np.mean([r["steps"] for r in rows])) if n else None,
+            "failure_counts": failure_counts(rows),
+            "successes_ending_still": successes_ending_still(rows),
+            "decisions": len(decisions),
+            "simulated_per_decision": float(np.mean([d["simulated"] for d in decisions]))
+            if decisions else None,
+            "cpu_seconds_per_decision": float(np.mean([d["cpu_seconds"] for d in decisions]))
+            if decisions else None,
+            "cpu_seconds": float(sum(r["cpu_seconds"] for r in rows)),
+            "kinds_chosen": dict(sum((Counter(r["kinds_chosen"]) for r in rows), Counter())),
+            "episodes_from": requested.start, "episodes_requested": len(requested),
+            "complete": n == len(requested), "episodes": rows}
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
+    """The 95 % Wilson score interval of k successes in n."""
+    if n == 0:
+        return None
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [float(centre - half), float(centre + half)]
+
+
+def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_path: Path,
+                     progress: bool = False) -> dict:
+    """Plays evaluate's episodes `episodes` (a range of k) of `policy` (search.PlannerPolicy)
+    round-robin over `objects` [(id, ObjectSpec)] in `cfg`'s env, resuming REPORT.rows.jsonl."""
+    from tqdm import tqdm
+
+    from corn_drake.rl.planner.search import Planner, PlannerEnv
+
+    if not objects:
+        raise InputError("evaluate: no objects to evaluate on")
+    if len(episodes) < 1:
+        raise InputError(f"evaluate: no episodes in [{episodes.start}, {episodes.stop})")
+    cfg = dataclasses.replace(cfg, seed=seed)  # as policy_env: the env's seed is the base seed
+    facts = policy.describe()
+    settings = {"task": cfg.task.name, "seed": seed, **facts,
+                "objects": [o for o, _ in objects]}
+    settings = json.loads(json.dumps(settings))  # as it reads back
+    rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
+    rows = [r for r in _read_rows(rows_path, settings) if r["episode"] in episodes]
+    if not rows_path.exists():
+        _append(rows_path, {"settings": settings})
+    done = {r["episode"] for r in rows}
+    envs, planner = {}, Planner(policy.config, policy.primitive, cfg.task)
+    bar = tqdm(total=len(episodes), initial=len(done), desc="episodes", unit="episode",
+               disable=not progress)
+    for k in episodes:
+        if k in done:
+            continue
+        object_id, spec = objects[k % len(objects)]
+        if object_id not in envs:
+            envs = {object_id: PlannerEnv(cfg, policy.primitive, spec)}  # one env alive
+        seed_k = episode_seed(seed, object_id, k // len(objects))
+        row = {"episode": k, "object": object_id, "seed": seed_k,
+               **play(envs[object_id], planner, seed_k)}
+        _append(rows_path, row)
+        rows.append(row)
+        write_json(report_path, report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task,
+                                          episodes, facts))
+        bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
+        bar.update()
+    bar.close()
+    return report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task, episodes, facts)

@@ -1,0 +1,256 @@
+"""Where the Ray workers run, what reaches them there, and what a run says about it (issue 56).
+
+- What each worker asks of Ray (`worker_cpus`) and how it is placed (`worker_options`).
+- The object library's files travel through Ray's object store (`pack_library` on the driver,
+  `arrive` in the worker): a worker on another node writes them once per node into a temp
+  folder, checks every object by content hash, and never opens the driver's paths. The encoder
+  and the run's config already travel inside the actor's arguments (the pickled agent and the
+  EnvFactory), so the library is the only file a worker needs.
+- Which node every worker is on, and every death with its reason (`WorkerRecord`): one line on
+  stdout per death, and the lot in metrics.json.
+
+The learner is the driver process itself (Ray only places the workers), so it stays on the
+node the command was started on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import ray
+
+from corn_drake.errors import InputError
+
+# Set by init_ray: True when this process joined a cluster (--ray-address), False when it started
+# its own Ray. Decides what a worker asks for (worker_cpus).
+joined_cluster = False
+
+# Workers not started this long after their creation get one line (WorkerRecord.placed): a
+# worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
+PLACEMENT_NOTICE_S = 60.0
+
+
+class NoRoomForWorkers(InputError):
+    """The cluster's live nodes cannot host the workers asked for (one line, exit 2; a run's
+    checkpoint on disk is kept as it was)."""
+
+
+def worker_cpus(num_workers: int) -> float:
+    """CPUs each worker asks Ray for: the core it keeps busy stepping its envs.
+
+    On a cluster one each, so Ray puts no more workers on a node than it has cores (`ray start
+    --num-cpus` says how many). This process's own Ray was started with the machine's usable
+    cores; more workers than that share them, cores / workers each (Ray counts CPUs to 1e-4):
+    oversubscribing a small machine is what a local run asks for (the project's machines give
+    about one core), never what a cluster run gets without saying so."""
+    if joined_cluster:
+        return 1.0
+    cores = ray.cluster_resources().get("CPU", 1.0)
+    if num_workers <= cores:
+        return 1.0
+    return max(math.floor(cores / num_workers * 1e4) / 1e4, 1e-4)
+
+
+def worker_options(cpus: float) -> dict:
+    """Ray options of every worker actor.
+
+    scheduling_strategy="SPREAD" per actor rather than a SPREAD placement group: SPREAD puts
+    the workers on as many nodes as have room, so a lost node takes as few workers as can be,
+    and a replacement after a node is lost goes to whichever node has room. A placement group
+    keeps its bundles reserved and reschedules a lost bundle as a unit, so a replacement would
+    wait for room in the group instead of using the nodes that are left."""
+    return {"num_cpus": cpus, "scheduling_strategy": "SPREAD"}
+
+
+def hosting_slots(cpus: float) -> int:
+    """How many workers of `cpus` CPUs the live nodes can hold at once (node by node)."""
+    return sum(int(node["Resources"].get("CPU", 0.0) / cpus + 1e-9)
+               for node in ray.nodes() if node["Alive"])
+
+
+def check_room(num_workers: int, cpus: float, what: str) -> None:
+    """NoRoomForWorkers when the live nodes cannot host `num_workers` of `cpus` CPUs: Ray would
+    leave the missing ones pending forever, and the run would hang instead of saying so."""
+    slots = hosting_slots(cpus)
+    if slots < num_workers:
+        raise NoRoomForWorkers(f"{what}: the Ray cluster's live nodes have room for {slots} "
+                               f"worker(s) of {cpus:g} CPU, {num_workers} needed: add nodes "
+                               f"(ray start --address ... --num-cpus N) or run fewer --workers")
+
+
+class WorkerBase:
+    """What every worker kind answers besides its work: its process and its node."""
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def node(self) -> str:
+        return ray.get_runtime_context().get_node_id()
+
+
+def death_reason(error: Exception) -> str:
+    """One line of why a worker died, from Ray's multi-line error ("its node has died", "its
+    worker process has died", ...)."""
+    if isinstance(error, ray.exceptions.ActorUnavailableError):
+        return "it became unreachable"
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    # Ray's message: a heading ("The actor died unexpectedly ..."), "key: value" lines (class,
+    # actor id, pid, ip), then the cause; the cause is the line worth printing.
+    causes = [line for line in lines[1:]
+              if line.split(":")[0] not in ("class_name", "actor_id", "pid", "name",
+                                            "namespace", "ip")]
+    line = (causes or lines or [type(error).__name__])[0]
+    for heading in ("The actor is dead because ", "The actor died because "):
+        if line.startswith(heading):
+            line = line[len(heading):]
+    return line.split(". ")[0].rstrip(".")[:200]
+
+
+class WorkerRecord:
+    """Which node each worker is on, and each replacement with its reason."""
+
+    def __init__(self, kind: str):
+        self.kind = kind
+        self.nodes: list[str] = []
+        self.deaths: list[dict] = []
+
+    def placed(self, actors: list, cpus: float) -> None:
+        """Waits for every worker to start and records its node. Workers still waiting after
+        PLACEMENT_NOTICE_S are named in one line: Ray leaves a worker pending, silently, while
+        the CPUs it asks for are held by others (check_room counts capacity, not use)."""
+        refs = [a.node.remote() for a in actors]
+        _, pending = ray.wait(refs, num_returns=len(refs), timeout=PLACEMENT_NOTICE_S)
+        if pending:
+            free = ray.available_resources().get("CPU", 0.0)
+            print(f"{len(pending)} {self.kind} worker(s) not started after "
+                  f"{PLACEMENT_NOTICE_S:.0f} s ({free:g} CPUs free in the Ray cluster, each "
+                  f"worker asks {cpus:g}): still waiting", flush=True)
+        self.nodes = ray.get(refs)
+
+    def replaced(self, i: int, error: Exception, actor, during: str) -> None:
+        """Records worker `i`'s death and its replacement `actor` (waited for), in one line."""
+        reason = death_reason(error)
+        try:
+            new = ray.get(actor.node.remote())
+        except ray.exceptions.RayActorError:  # died starting: the caller's next call says so
+            new = "none (it died starting)"
+        old = self.nodes[i]
+        self.nodes[i] = new
+        self.deaths.append({"worker": i, "node": old, "reason": reason,
+                            "replacement_node": new, "during": during})
+        print(f"{self.kind} worker {i} on node {old[:12]} died ({reason}); replaced on node "
+              f"{new[:12]}, {during}", flush=True)
+
+    def report(self) -> dict:
+        """metrics.json's record of where the workers ran."""
+        context = ray.get_runtime_context()
+        return {"worker_nodes": list(self.nodes), "worker_restarts": list(self.deaths),
+                "driver_node": context.get_node_id(), "ray_gcs_address": context.gcs_address,
+                "ray_cluster_joined": joined_cluster}
+
+
+def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
+    """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
+    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept)."""
+    with contextlib.suppress(Exception):
+        ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
+    check_room(len(workers), cpus, f"replacing {record.kind} worker {i}")
+    workers[i] = spawn()
+
+
+# --- the object library through the object store ------------------------------------------
+
+
+@dataclasses.dataclass
+class LibraryFiles:
+    """What a run's envs read of their object library, as bytes: the manifest and every file of
+    the objects the envs use, with each object's content hash (assets/content_hash.py)."""
+    driver_node: str
+    driver_path: str
+    files: dict[str, bytes]
+    hashes: dict[str, str]
+    digest: str  # the cache folder's name: the same library content, the same folder
+
+
+def pack_library(factory) -> LibraryFiles | None:
+    """The library `factory`'s envs use, read on the driver; None when they use none (a box)."""
+    from corn_drake.assets.content_hash import object_hash
+    from corn_drake.assets.manifest import FILE_FIELDS, library_file, manifest_path, read_manifest
+
+    obj = factory.teacher_config.scene.object
+    if obj.kind != "library":
+        return None
+    library = Path(obj.library)
+    ids = factory.train_objects if obj.cycles_library else [obj.object_id]
+    objects = {o.id: o for o in read_manifest(library).objects}
+    files = {manifest_path(library).name: manifest_path(library).read_bytes()}
+    for object_id in ids:
+        entry = objects[object_id]
+        for field in FILE_FIELDS:
+            value = getattr(entry, field)
+            for rel in [value] if isinstance(value, str) else value or []:
+                if rel:
+                    files[rel] = library_file(library, entry, field, rel).read_bytes()
+    hashes = {object_id: object_hash(library, objects[object_id]) for object_id in ids}
+    digest = hashlib.sha256(json.dumps(hashes, sort_keys=True).encode()
+                            + files[manifest_path(library).name]).hexdigest()
+    return LibraryFiles(ray.get_runtime_context().get_node_id(), str(library), files, hashes,
+                        digest)
+
+
+def arrive(factory, library: LibraryFiles | None):
+    """`factory` as this worker's node must use it: unchanged on the driver's node (its paths
+    are this node's), else pointing at this node's copy of the library (written on first use,
+    checked by content hash). The driver's path is never opened on another node."""
+    if library is None or ray.get_runtime_context().get_node_id() == library.driver_node:
+        return factory
+    folder = _node_copy(library)
+    config = copy.deepcopy(factory.config)
+    teacher = config.teacher if hasattr(config, "teacher") else config
+    teacher.scene.object.library = str(folder)
+    # A new EnvFactory: the driver's cached train_objects (read from its path) stays behind.
+    return dataclasses.replace(factory, config=config)
+
+
+def _node_copy(library: LibraryFiles) -> Path:
+    """The node's folder holding `library`: written once per node (the first worker there
+    writes it into a private folder and renames it into place; a worker that lost the race
+    drops its own), and every object's content hash checked before it is used."""
+    from corn_drake.assets.content_hash import object_hash
+    from corn_drake.assets.manifest import read_manifest
+
+    root = Path(tempfile.gettempdir()) / "corn_drake_libraries"
+    folder = root / library.digest[:24]
+    if (folder / ".checked").exists():
+        return folder
+    root.mkdir(parents=True, exist_ok=True)
+    arriving = Path(tempfile.mkdtemp(prefix=".arriving-", dir=root))
+    try:
+        for rel, data in library.files.items():
+            path = arriving / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        objects = {o.id: o for o in read_manifest(arriving).objects}
+        for object_id, expected in library.hashes.items():
+            got = object_hash(arriving, objects[object_id])
+            if got != expected:
+                raise RuntimeError(f"library object {object_id!r} arrived from "
+                                   f"{library.driver_path} with content hash {got[:12]}, the "
+                                   f"driver's is {expected[:12]}")
+        (arriving / ".checked").write_text("")
+        try:
+            os.rename(arriving, folder)
+        except OSError:  # another worker on this node put it there first
+            pass
+    finally:
+        shutil.rmtree(arriving, ignore_errors=True)
+    return folder
