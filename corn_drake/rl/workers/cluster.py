@@ -158,6 +158,22 @@ class WorkerRecord:
                 "ray_cluster_joined": joined_cluster}
 
 
+def start_pool(pool, factory, num_workers: int, kind: str) -> None:
+    """What every worker pool does first (rollout, segment, primitive): the library's files put
+    in the object store once (read here: no node needs the driver's filesystem), each worker's
+    CPUs and the room for them checked, the workers spawned by `pool._spawn(w)` and where they
+    landed recorded. Sets pool._library, .cpus, .workers, .record and .restarts."""
+    import ray
+
+    pool._library = ray.put(pack_library(factory))
+    pool.cpus = worker_cpus(num_workers)
+    check_room(num_workers, pool.cpus, f"{kind} workers")
+    pool.workers = [pool._spawn(w) for w in range(num_workers)]
+    pool.record = WorkerRecord(kind)
+    pool.record.placed(pool.workers, pool.cpus)
+    pool.restarts = 0
+
+
 def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
     """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
     NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept)."""

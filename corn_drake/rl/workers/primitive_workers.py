@@ -37,8 +37,7 @@ from corn_drake.rl.primitive.collection import (
 )
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
 from corn_drake.rl.workers import cluster
-from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
-                                           spawn_replacement, worker_cpus, worker_options)
+from corn_drake.rl.workers.cluster import WorkerBase, arrive, spawn_replacement, worker_options
 
 MAX_REPLACEMENTS = 3
 
@@ -74,15 +73,8 @@ class RayPrimitiveCollectors:
         self._seed, self._start_step = int(seed), int(start_step)
         # The networks' architecture and the encoder travel once, at spawn.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
-        # The library's files too (once, read here): no node needs the driver's filesystem.
-        self._library = ray.put(cluster.pack_library(factory))
-        self.cpus = worker_cpus(num_workers)
-        check_room(num_workers, self.cpus, "primitive workers")
         self._spawns = [0] * num_workers
-        self.workers = [self._spawn(w) for w in range(num_workers)]
-        self.record = WorkerRecord("primitive")
-        self.record.placed(self.workers, self.cpus)
-        self.restarts = 0
+        cluster.start_pool(self, factory, num_workers, "primitive")
         self.version, self._weights = None, None
         self._pending: dict = {}  # future -> (worker index, rounds, exploration): to resend
         self._replaced_in_a_row = 0

@@ -19,8 +19,7 @@ import ray
 
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory, StepResult, concat_obs
 from corn_drake.rl.workers import cluster
-from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
-                                           spawn_replacement, worker_cpus, worker_options)
+from corn_drake.rl.workers.cluster import WorkerBase, arrive, spawn_replacement, worker_options
 
 
 @ray.remote(num_cpus=1)
@@ -155,14 +154,7 @@ class RayEnvBatch:
         if not factory.num_envs:  # every worker's envs share the object rounds
             factory = dataclasses.replace(factory, num_envs=num_workers * envs_per_worker)
         self.factory, self.envs_per_worker = factory, envs_per_worker
-        # The library's files (once, read here): no node needs the driver's filesystem.
-        self._library = ray.put(cluster.pack_library(factory))
-        self.cpus = worker_cpus(num_workers)
-        check_room(num_workers, self.cpus, "rollout workers")
-        self.workers = [self._spawn(w) for w in range(num_workers)]
-        self.record = WorkerRecord("rollout")
-        self.record.placed(self.workers, self.cpus)
-        self.restarts = 0
+        cluster.start_pool(self, factory, num_workers, "rollout")
 
     def _spawn(self, w: int):
         return RolloutWorker.options(**worker_options(self.cpus)).remote(

@@ -27,8 +27,7 @@ import ray
 
 from corn_drake.rl.ppo.segments import Segment, SegmentCollector, concat_segments
 from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
-from corn_drake.rl.workers.cluster import (WorkerBase, WorkerRecord, arrive, check_room,
-                                           spawn_replacement, worker_cpus, worker_options)
+from corn_drake.rl.workers.cluster import WorkerBase, arrive, spawn_replacement, worker_options
 from corn_drake.rl.workers import cluster
 
 # A worker replaced this many times within one update's collection means the fault is not the
@@ -63,14 +62,7 @@ class RaySegmentCollectors:
         self.factory, self.envs_per_worker = factory, envs_per_worker
         # The agent's architecture travels once, at spawn; weights come with every update.
         self._agent = ray.put(copy.deepcopy(agent).cpu())
-        # The library's files too (once, read here): no node needs the driver's filesystem.
-        self._library = ray.put(cluster.pack_library(factory))
-        self.cpus = worker_cpus(num_workers)
-        check_room(num_workers, self.cpus, "rollout workers")
-        self.workers = [self._spawn(w) for w in range(num_workers)]
-        self.record = WorkerRecord("rollout")
-        self.record.placed(self.workers, self.cpus)
-        self.restarts = 0
+        cluster.start_pool(self, factory, num_workers, "rollout")
         self.version = None  # the update whose weights are in the object store
         self._weights = None
 
