@@ -136,9 +136,9 @@ DEPENDENCY_MODULES = {"pydrake", "torch", "numpy", "scipy", "open3d", "trimesh",
 def missing_dependency_line(module: str) -> str:
     """One line for a Python that lacks `module` (a dependency): which Python, and how to run
     the CLI with the project's environment instead."""
-    from pathlib import Path
+    from corn_drake.package_data import CHECKOUT_ROOT
 
-    venv = Path(__file__).resolve().parents[1] / ".venv" / "bin"
+    venv = CHECKOUT_ROOT / ".venv" / "bin"  # a source checkout's `make install` venv
     how = (f"activate the project's venv (source {venv}/activate) or run {venv}/corn-drake"
            if (venv / "python").exists() else
            "install the project into this Python (pip install corn-drake, or `make install` / "

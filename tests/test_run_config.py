@@ -101,7 +101,7 @@ def test_set_overrides_address_the_run_config_and_say_what_they_changed():
 
 
 @pytest.mark.parametrize("item, named", [
-    ("ppo.lrr=1", "unknown key 'ppo.lrr'; ppo has gamma"),
+    ("ppo.lrr=1", "unknown key 'ppo.lrr'; did you mean 'ppo.lr'? ppo has gamma"),
     ("nosection.x=1", "unknown key 'nosection'"),
     ("policy.x=1", "policy is a value"),
     ("task.episode_steps=lots", "env.task.episode_steps = 'lots'"),
