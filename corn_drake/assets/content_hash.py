@@ -20,8 +20,8 @@ import hashlib
 import json
 from pathlib import Path
 
-from corn_drake.assets.manifest import (FILE_FIELDS, LibraryObject, library_file,
-                                        manifest_path, read_manifest)
+from corn_drake.assets.manifest import (LibraryObject, library_file, manifest_path,
+                                        named_files, read_manifest)
 from corn_drake.errors import InputError, MissingInputError
 
 IDENTITY_FIELDS = ("id", "family", "source", "split", "unseen_group", "thin")
@@ -36,20 +36,16 @@ def object_hash(library: str | Path, obj: LibraryObject) -> str:
     record.update({k: None if getattr(obj, k) is None else format(float(getattr(obj, k)), ".12g")
                    for k in FLOAT_FIELDS})
     h.update(json.dumps(record, sort_keys=True).encode())
-    for field in FILE_FIELDS:
-        value = getattr(obj, field)
-        for rel in [value] if isinstance(value, str) else value or []:
-            if not rel:  # a hand-written library may name no file ("")
-                continue
-            path = library_file(library, obj, field, rel)
-            try:
-                data = path.read_bytes()
-            except FileNotFoundError:
-                raise MissingInputError(f"object {obj.id!r} of {manifest_path(library)}: {field} "
-                                        f"file not found: {path}") from None
-            # The name and the length delimit each file, so moving bytes between files changes it.
-            h.update(f"\n{field} {rel} {len(data)}\n".encode())
-            h.update(data)
+    for field, rel in named_files(obj):
+        path = library_file(library, obj, field, rel)
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            raise MissingInputError(f"object {obj.id!r} of {manifest_path(library)}: {field} "
+                                    f"file not found: {path}") from None
+        # The name and the length delimit each file, so moving bytes between files changes it.
+        h.update(f"\n{field} {rel} {len(data)}\n".encode())
+        h.update(data)
     return h.hexdigest()
 
 

@@ -128,6 +128,17 @@ def _id_problem(object_id: str) -> str | None:
     return None
 
 
+def named_files(obj: LibraryObject) -> list[tuple[str, str]]:
+    """(field, relative path) of every file `obj` names, in FILE_FIELDS order; a field holds one
+    path or a list (hulls), and a hand-written library may name no file ("")."""
+    named = []
+    for field in FILE_FIELDS:
+        value = getattr(obj, field)
+        named += [(field, rel) for rel in ([value] if isinstance(value, str) else value or [])
+                  if rel]
+    return named
+
+
 def library_file(library: str | Path, obj: LibraryObject, field: str, rel: str) -> Path:
     """LIBRARY/rel, the file `obj`'s `field` names, after checking that it resolves inside the
     library: read_manifest refused absolute and ".." paths already, and this also follows
@@ -262,13 +273,10 @@ def _check_names(obj: LibraryObject, path: Path) -> None:
     problem = _id_problem(obj.id)
     if problem:
         raise InputError(f"{WHAT} {path}: object id {obj.id!r} {problem}")
-    for field in FILE_FIELDS:
-        value = getattr(obj, field)
-        for rel in [value] if isinstance(value, str) else value or []:
-            problem = _path_problem(rel) if rel else None  # "": no file (hand-written libraries)
-            if problem:
-                raise InputError(f"{WHAT} {path}: object {obj.id!r} {field} path {rel!r} "
-                                 f"{problem}")
+    for field, rel in named_files(obj):
+        problem = _path_problem(rel)
+        if problem:
+            raise InputError(f"{WHAT} {path}: object {obj.id!r} {field} path {rel!r} {problem}")
 
 
 def write_manifest(library: str | Path, manifest: Manifest) -> None:

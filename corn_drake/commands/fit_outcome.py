@@ -34,7 +34,7 @@ def add_arguments(parser):
     parser.add_argument("--task", default=None,
                         help="the run folder's task (as evaluate --task; default: RUN's own)")
     parser.add_argument("--set", action="append", default=[], dest="set", metavar="KEY=VALUE",
-                        help="env.* / primitive.* / outcome.* setting of the run folder (as "
+                        help="env.* / primitive.* setting of the run folder (as "
                              "evaluate's; default: none, RUN's own)")
     parser.add_argument("--inputs", choices=OUTCOME_INPUT_KINDS, default="raw",
                         help="what the model reads: the candidate's own numbers (raw) or "

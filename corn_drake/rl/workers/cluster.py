@@ -19,7 +19,6 @@ import contextlib
 import copy
 import dataclasses
 import hashlib
-import json
 import math
 import os
 import shutil
@@ -199,8 +198,8 @@ class LibraryFiles:
 
 def pack_library(factory) -> LibraryFiles | None:
     """The library `factory`'s envs use, read on the driver; None when they use none (a box)."""
-    from corn_drake.assets.content_hash import object_hash
-    from corn_drake.assets.manifest import FILE_FIELDS, library_file, manifest_path, read_manifest
+    from corn_drake.assets.content_hash import combined_hash, object_hashes
+    from corn_drake.assets.manifest import library_file, manifest_path, named_files, read_manifest
 
     obj = factory.teacher_config.scene.object
     if obj.kind != "library":
@@ -210,14 +209,10 @@ def pack_library(factory) -> LibraryFiles | None:
     objects = {o.id: o for o in read_manifest(library).objects}
     files = {manifest_path(library).name: manifest_path(library).read_bytes()}
     for object_id in ids:
-        entry = objects[object_id]
-        for field in FILE_FIELDS:
-            value = getattr(entry, field)
-            for rel in [value] if isinstance(value, str) else value or []:
-                if rel:
-                    files[rel] = library_file(library, entry, field, rel).read_bytes()
-    hashes = {object_id: object_hash(library, objects[object_id]) for object_id in ids}
-    digest = hashlib.sha256(json.dumps(hashes, sort_keys=True).encode()
+        for field, rel in named_files(objects[object_id]):
+            files[rel] = library_file(library, objects[object_id], field, rel).read_bytes()
+    hashes = object_hashes(library, ids)
+    digest = hashlib.sha256(combined_hash(hashes).encode()
                             + files[manifest_path(library).name]).hexdigest()
     return LibraryFiles(ray.get_runtime_context().get_node_id(), str(library), files, hashes,
                         digest)
