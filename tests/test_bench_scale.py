@@ -200,3 +200,50 @@ def test_a_run_resumes_on_another_device_with_the_same_policy(tmp_path, capsys, 
     assert main([*common, "--steps", "16", "--device", other]) == 0  # not refused
     assert f'device "{device}" -> "{other}"' in capsys.readouterr().out
     assert json.loads((run / "metrics.json").read_text())["global_step"] == 16
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("", 0))
+        return s.getsockname()[1]  # nothing listens there once this returns
+
+
+@pytest.mark.parametrize("address", ["127.0.0.1:{closed}", "nonsense", "10.0.0.5:notaport"])
+def test_scale_refuses_a_ray_address_nothing_answers_at(tmp_path, capsys, address):
+    """Refused in one line naming --ray-address, exit 2, before any run (ray.init would retry
+    such an address for minutes) and with no report written."""
+    address = address.format(closed=_closed_port())
+    path = tmp_path / "scale.json"
+    assert main(["bench", "scale", "--report", str(path), "--ray-address", address]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert "--ray-address" in err and address in err, err
+    assert not path.exists()
+
+
+def test_scale_ray_address_reaches_every_runs_trainer_config(tmp_path, monkeypatch):
+    """--ray-address is checked (something answers there: here a plain socket) and goes into
+    the trainer's config (the Trainer joins that cluster: rl/ppo/trainer.py); no Ray started."""
+    import socket
+
+    from corn_drake.bench import timed_training
+
+    configs = []
+
+    def stop(cfg, *args, **kwargs):
+        configs.append(cfg)
+        raise InputError("stopped here")
+
+    monkeypatch.setattr(timed_training, "run_trainer", stop)
+    with socket.create_server(("", 0)) as server:
+        address = f"127.0.0.1:{server.getsockname()[1]}"
+        assert main(["bench", "scale", "--report", str(tmp_path / "s.json"), "--ray-address",
+                     address, "--workers", "2"]) == 2
+    assert [c.ray_address for c in configs] == [address]
+    assert not (tmp_path / "s.json").exists()
+    # Without it: a local Ray of the run's own, as before.
+    configs.clear()
+    assert main(["bench", "scale", "--report", str(tmp_path / "s.json")]) == 2
+    assert [c.ray_address for c in configs] == [""]

@@ -84,6 +84,10 @@ ROWS = [
     _row(f"train --workers -1 {OUT}", "--workers"),
     _row(f"train --minibatches 0 {OUT}", "--minibatches"),
     _row(f"train --init-log-std nan {OUT}", "--init-log-std"),
+    # A Ray address nothing answers at: one line at once, not ray.init retrying for minutes.
+    _row("train --policy state --workers 1 --ray-address 127.0.0.1:1 --out {root}/new_run",
+         "--ray-address",
+         "127.0.0.1:1"),
     _row(f"train --torch-threads 0 {OUT}", "--torch-threads"),
     _row(f"train --torch-threads some {OUT}", "--torch-threads", "'torch', 'auto' or an integer"),
     _row(f"train --policy bogus {OUT}", "--policy"),

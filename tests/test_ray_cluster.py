@@ -320,3 +320,52 @@ def test_a_node_in_its_own_mount_namespace_trains_without_the_library(tmp_path,
         if node is not None:
             _end_session(node.pid)  # the node's raylet and workers: `ray start`'s session
         c.shutdown()
+
+
+def test_bench_scale_on_a_two_node_cluster_names_both_nodes(tmp_path, no_ray_in_this_process):
+    # `bench scale --ray-address`: each worker count's workers join the cluster (the head has no
+    # CPU: none can run beside the driver), and the report names the nodes each row ran on.
+    from corn_drake.cli import main
+
+    with _cluster(cpus_a=1) as (c, nodes):
+        report = tmp_path / "scale.json"
+        assert main(["bench", "scale", "--report", str(report), "--ray-address", c.address,
+                     "--workers", "2", "--policy", "state", "--envs-per-worker", "1",
+                     "--rollout-steps", "4", "--updates", "1", "--warmup-updates", "0",
+                     "--torch-threads", "1"]) == 0
+        results = json.loads(report.read_text())["results"]
+        both = sorted([nodes["A"].node_id, nodes["B"].node_id])
+        assert results["workers"] == [1, 2] and results["nodes"] == [1, 2]
+        assert results["worker_nodes"][1] == both and results["worker_nodes"][0][0] in both
+        one, two = results["runs"]
+        assert sorted(two["worker_nodes"]) == both and two["nodes"] == 2
+        assert results["efficiency"][0] == 1.0 and all(r > 0 for r in results["steps_per_s"])
+        assert results["ray_address"] == c.address and results["warnings"] == []
+        assert results["driver_node"] not in both  # the learner stayed on the driver's node
+        assert one["worker_restarts"] == two["worker_restarts"] == 0
+
+
+def test_distill_command_on_a_two_node_cluster_without_the_drivers_files(
+        tmp_path, monkeypatch, no_ray_in_this_process):
+    # The whole `corn-drake distill` (DAgger student) with --ray-address: one lock-step worker
+    # per node, student envs on a library the driver moved away after packing it, a shipped
+    # teacher (models/weights/push_state) and the shipped CORN encoder.
+    from corn_drake.cli import main
+    from tests.paths import REPO_ROOT
+
+    _hide_after_packing(monkeypatch)
+    library = write_loadable_library(tmp_path / "lib", 2)
+    weights = REPO_ROOT / "models" / "weights"
+    with _cluster(cpus_a=1) as (c, nodes):
+        out = tmp_path / "student"
+        assert main(["distill", "--run", str(weights / "push_state"), "--encoder",
+                     str(weights / "push_corn" / "encoder.pt"), "--objects", str(library),
+                     "--perception", "ground_truth", "--workers", "2", "--envs-per-worker", "1",
+                     "--steps", "8", "--window", "4", "--set", "task.episode_steps=5",
+                     "--log-every", "1", "--checkpoint-every", "1", "--torch-threads", "1",
+                     "--ray-address", c.address, "--out", str(out), "--no-progress"]) == 0
+        written = json.loads((out / "metrics.json").read_text())
+        assert written["global_step"] == 8 and written["ray_cluster_joined"]
+        assert set(written["worker_nodes"]) == {nodes["A"].node_id, nodes["B"].node_id}
+        assert written["worker_restarts"] == [] and written["driver_node"] not in \
+            written["worker_nodes"]

@@ -31,6 +31,12 @@ transfer, unpacking).
 
 Each run starts its own local Ray and shuts it down after (rl/workers/ray_workers.init_ray ends what
 Ray leaves behind), unless Ray was already running in this process: then that one is used.
+With --ray-address each run joins that Ray cluster instead (its workers one CPU each, SPREAD
+over the nodes: rl/workers/cluster.py) and leaves it running; the learner and the in-process
+run stay in this process. Every row names the Ray nodes its workers ran on: `worker_nodes`
+(each worker's node id, as metrics.json) and `nodes` (how many distinct), and the report's
+top-level `nodes` / `worker_nodes` lists give them per worker count (the distinct node ids,
+sorted), beside `steps_per_s` and `efficiency`.
 """
 
 from __future__ import annotations
@@ -69,6 +75,10 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu",
                         help="torch device of the learner (agent, batched inference, PPO "
                              "update): cpu, cuda or cuda:N; the envs run on the CPU")
+    parser.add_argument("--ray-address", default=None, metavar="ADDRESS",
+                        help="run each worker count's workers on the Ray cluster at ADDRESS "
+                             "(HOST:PORT of its head, as `ray start --head` printed it); the "
+                             "learner stays in this process (default: a local Ray per run)")
 
 
 def instrument_rollouts(trainer, timer, segments: list) -> None:
@@ -130,6 +140,7 @@ def measure(args, env_cfg, workers: int) -> dict:
                                                  trainer_logged_steps_per_s)
 
     cfg = train_config(args, env_cfg, workers, args.envs_per_worker, args.device)
+    cfg.ray_address = args.ray_address or ""
     timer, segments = PhaseTimer(), []
     with _RaySession():
         trainer, metrics = run_trainer(cfg, timer, args.warmup_updates,
@@ -145,6 +156,7 @@ def measure(args, env_cfg, workers: int) -> dict:
                "ppo_update": s[PPO_UPDATE], "other": s[timer.WINDOW]}
     history = metrics["history"][args.warmup_updates:]  # the timed updates
     pace, inference_share = worker_paces(segments, args.rollout_steps)
+    worker_nodes = metrics.get("worker_nodes", [])  # each Ray worker's node id (none: in process)
     return {
         "workers": workers,
         "envs": max(workers, 1) * args.envs_per_worker,
@@ -162,6 +174,9 @@ def measure(args, env_cfg, workers: int) -> dict:
         "episodes_finished": sum(r["episodes"] for r in history),
         "sim_errors": sum(r["sim_errors"] for r in history),
         "worker_restarts": restarts,
+        "worker_nodes": worker_nodes,
+        "nodes": len(set(worker_nodes)),
+        "driver_node": metrics.get("driver_node"),
     }
 
 
@@ -193,11 +208,17 @@ def run(args) -> dict:
     from corn_drake.config.diagram_files import load_teacher_config
 
     device = training_device(args.device, "--device")  # before any env or Ray starts
+    if args.ray_address:  # before any run: ray.init retries an address for minutes
+        from corn_drake.rl.workers.cluster import check_ray_address
+
+        check_ray_address(args.ray_address, "--ray-address")
     env_cfg = load_teacher_config(args.task)
     env_cfg.check()
     cpus = usable_cpus()
     counts = sorted(set(args.workers) | {1})  # 1 first: the baseline
-    warnings = oversubscription_warnings(counts, cpus)
+    # On a cluster the workers take the nodes' CPUs (`ray start --num-cpus`; too few: the run
+    # stops with one line), not this machine's.
+    warnings = [] if args.ray_address else oversubscription_warnings(counts, cpus)
     for line in warnings:
         print(f"warning: {line}", file=sys.stderr)
     runs = []
@@ -209,7 +230,10 @@ def run(args) -> dict:
         print(f"  in process: {local['steps_per_s']:.0f} steps/s", flush=True)
         for workers in counts:
             runs.append(measure(args, env_cfg, workers))
-            print(f"  {workers} workers: {runs[-1]['steps_per_s']:.0f} steps/s, learner share "
+            nodes = runs[-1].get("nodes", 1)
+            where = f" on {nodes} node{'s' * (nodes != 1)}" if args.ray_address else ""
+            print(f"  {workers} workers{where}: {runs[-1]['steps_per_s']:.0f} steps/s, "
+                  f"learner share "
                   f"{runs[-1]['learner_share']:.2f}, worker pace "
                   f"{runs[-1]['env_steps_per_s_per_worker']:.0f} env steps/s", flush=True)
     in_process = local["env_steps_per_s_per_worker"]
@@ -235,6 +259,11 @@ def run(args) -> dict:
         # True when --workers left out 1: its run was added as the baseline.
         "baseline_added": 1 not in args.workers,
         "runs": runs,
+        # Per worker count: how many Ray nodes its workers ran on, and which (sorted node ids).
+        "nodes": [r.get("nodes", 1) for r in runs],
+        "worker_nodes": [sorted(set(r.get("worker_nodes", []))) for r in runs],
+        "ray_address": args.ray_address,
+        "driver_node": runs[-1].get("driver_node"),
         "policy": args.policy,
         "task": env_cfg.task.name,
         "envs_per_worker": args.envs_per_worker,

@@ -61,6 +61,11 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
         raise ValueError("run_episode: recording needs an env built with meshcat=Meshcat()")
     obs, info = env.reset(seed=seed)
     start_pose = env.object_pose()
+    if env.meshcat is not None:  # the goal, the hand's path and a camera on the push
+        from corn_drake.viz.meshcat import show_goal
+
+        show_goal(env.meshcat, env.scene.object_spec, env.episode.goal_pose, start_pose)
+        env.hand_path = [env.tool_position()]
     if record_path is not None:
         env.meshcat.StartRecording(set_visualizations_while_recording=False)
     total, steps, status, error, tracking = 0.0, 0, info.get("status", {}), None, []
@@ -76,6 +81,11 @@ def run_episode(env, policy=None, *, seed: int | None = None, max_steps: int | N
         if terminated or truncated:
             break
     recording = None
+    if env.meshcat is not None:
+        from corn_drake.viz.meshcat import show_path
+
+        show_path(env.meshcat, env.hand_path)
+        env.hand_path = None
     if record_path is not None:
         from corn_drake.viz.meshcat import save_recording
 

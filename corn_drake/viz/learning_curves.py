@@ -85,9 +85,11 @@ def at_equal_time(runs: dict[str, list[dict]],
 
 
 def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "steps",
-                         rates: Mapping[str, str | float] | str | float = "median") -> None:
+                         rates: Mapping[str, str | float] | str | float = "median",
+                         steps: str = "env steps") -> None:
     """Success rate and return against env steps or training hours, one line per run
-    (label -> history rows)."""
+    (label -> history rows); `steps` names what a row's step counts (a primitive run's are
+    primitives)."""
     if x not in X_AXES:
         raise ValueError(f"x must be one of {X_AXES}, got {x!r}")
     # A Figure of its own, not pyplot: writing the file leaves the process's backend alone,
@@ -111,7 +113,7 @@ def plot_learning_curves(runs: dict[str, list[dict]], path: Path, x: str = "step
         axes[1].plot(xs, [h["return"] for h in history], label=label)
     kinds = {str(r) for r in (rates.values() if isinstance(rates, Mapping) else [rates])}
     how = kinds.pop() if len(kinds) == 1 and kinds <= set(RATES) else "benchmarked"
-    xlabel = f"training hours ({how} steps/s, this machine)" if x == "hours" else "env steps"
+    xlabel = f"training hours ({how} steps/s, this machine)" if x == "hours" else steps
     axes[0].set(xlabel=xlabel, ylabel="success rate (last 100 episodes)", ylim=(0, 1))
     axes[1].set(xlabel=xlabel, ylabel="episode return")
     if x == "steps":

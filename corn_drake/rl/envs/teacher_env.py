@@ -87,6 +87,9 @@ class DiagramEnv(gym.Env):
         self._steps = 0
         self._np_random = np.random.default_rng(self.teacher_cfg.seed)
         self.episode: Episode | None = None  # the current episode's draws (set by reset)
+        # The tool's position after every policy period while a list (run_episode sets one
+        # when it draws the hand's path in Meshcat); None: nothing kept.
+        self.hand_path: list[np.ndarray] | None = None
 
     # --- what subclasses define ------------------------------------------------------------
     def _observation(self):
@@ -106,6 +109,13 @@ class DiagramEnv(gym.Env):
         """The object's pose in the world now, as [p, q_wxyz] (for reports: where it ended)."""
         X = self.scene.plant.EvalBodyPoseInWorld(self._plant_context, self.scene.object_body)
         return np.concatenate([X.translation(), X.rotation().ToQuaternion().wxyz()])
+
+    def tool_position(self) -> np.ndarray:
+        """The tool frame's origin in the world now (where the closed fingers push from)."""
+        from corn_drake.scene.franka import tool_frame
+
+        frame = tool_frame(self.scene.plant, self.scene.panda)
+        return frame.CalcPoseInWorld(self._plant_context).translation().copy()
 
     def object_speed(self) -> dict[str, float]:
         """The object's speed now: {"linear" (m/s), "angular" (rad/s)}."""
@@ -190,6 +200,8 @@ class DiagramEnv(gym.Env):
             # zero observation only keeps the shapes; reset() before stepping again.
             info.setdefault("sim_error", "non-finite state after step")
             return zeros_like_space(self.observation_space), 0.0, True, False, info
+        if self.hand_path is not None:
+            self.hand_path.append(self.tool_position())
         status = self._status()
         info["status"] = status
         info.update(self._extra_info())

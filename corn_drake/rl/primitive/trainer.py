@@ -255,7 +255,7 @@ class PrimitiveTrainer:
         write_json(self.out / "metrics.json", metrics)
         if self.history:
             plot_learning_curves({cfg.policy: self.history},
-                                 self.out / "plots" / "learning_curve.png")
+                                 self.out / "plots" / "learning_curve.png", steps="primitives")
         return metrics
 
     def _log(self, writer, losses, window, bar, progress) -> None:

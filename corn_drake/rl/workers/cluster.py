@@ -3,7 +3,8 @@
 - What each worker asks of Ray (`worker_cpus`) and how it is placed (`worker_options`).
 - The object library's files travel through Ray's object store (`pack_library` on the driver,
   `arrive` in the worker): a worker on another node writes them once per node into a temp
-  folder, checks every object by content hash, and never opens the driver's paths. The encoder
+  folder (rl/workers/node_library_cache.py), checks every object by content hash, and never
+  opens the driver's paths. The encoder
   and the run's config already travel inside the actor's arguments (the pickled agent and the
   EnvFactory), so the library is the only file a worker needs.
 - Which node every worker is on, and every death with its reason (`WorkerRecord`): one line on
@@ -21,13 +22,13 @@ import dataclasses
 import hashlib
 import math
 import os
-import shutil
-import tempfile
+import socket
 from pathlib import Path
 
 import ray
 
 from corn_drake.errors import InputError
+from corn_drake.rl.workers.node_library_cache import node_copy
 
 # Set by init_ray: True when this process joined a cluster (--ray-address), False when it started
 # its own Ray. Decides what a worker asks for (worker_cpus).
@@ -41,6 +42,38 @@ PLACEMENT_NOTICE_S = 60.0
 class NoRoomForWorkers(InputError):
     """The cluster's live nodes cannot host the workers asked for (one line, exit 2; a run's
     checkpoint on disk is kept as it was)."""
+
+
+def check_ray_address(address: str, flag: str = "--ray-address") -> None:
+    """InputError (one line naming `flag`) unless a Ray cluster's head answers at `address`
+    (HOST:PORT, ray://HOST:PORT, or auto: the cluster `ray start` left on this machine).
+
+    Checked before any work: ray.init on an address where nothing listens retries for minutes
+    before it fails (2 min and still retrying in a probe here). Only that something accepts a
+    connection at the port is checked; ray.init says the rest."""
+    import ray._private.services as services
+
+    text = address.strip()
+    if text == "auto":
+        try:
+            text = services.canonicalize_bootstrap_address_or_die("auto")
+        except ConnectionError:
+            raise InputError(f"{flag} auto: no Ray cluster found on this machine; start one "
+                             f"with `ray start --head` or give HOST:PORT") from None
+    host, _, port = text.removeprefix("ray://").rpartition(":")
+    host = host.strip("[]")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError(f"{flag} {address!r}: expected HOST:PORT of a Ray cluster's head "
+                         f"(e.g. 10.0.0.5:6379, as `ray start --head` printed it)")
+    if not text.startswith("ray://"):
+        host = services.resolve_ip_for_localhost(host)  # where ray.init will connect
+    try:
+        socket.create_connection((host, int(port)), timeout=5.0).close()
+    except OSError as e:
+        reason = e.strerror or str(e) or type(e).__name__
+        raise InputError(f"{flag} {address}: no Ray cluster answers at {host}:{port} ({reason}); "
+                         f"start its head with `ray start --head --port {port}`, or leave "
+                         f"{flag} out for a local Ray") from None
 
 
 def worker_cpus(num_workers: int) -> float:
@@ -224,44 +257,9 @@ def arrive(factory, library: LibraryFiles | None):
     checked by content hash). The driver's path is never opened on another node."""
     if library is None or ray.get_runtime_context().get_node_id() == library.driver_node:
         return factory
-    folder = _node_copy(library)
+    folder = node_copy(library)
     config = copy.deepcopy(factory.config)
     teacher = config.teacher if hasattr(config, "teacher") else config
     teacher.scene.object.library = str(folder)
     # A new EnvFactory: the driver's cached train_objects (read from its path) stays behind.
     return dataclasses.replace(factory, config=config)
-
-
-def _node_copy(library: LibraryFiles) -> Path:
-    """The node's folder holding `library`: written once per node (the first worker there
-    writes it into a private folder and renames it into place; a worker that lost the race
-    drops its own), and every object's content hash checked before it is used."""
-    from corn_drake.assets.content_hash import object_hash
-    from corn_drake.assets.manifest import read_manifest
-
-    root = Path(tempfile.gettempdir()) / "corn_drake_libraries"
-    folder = root / library.digest[:24]
-    if (folder / ".checked").exists():
-        return folder
-    root.mkdir(parents=True, exist_ok=True)
-    arriving = Path(tempfile.mkdtemp(prefix=".arriving-", dir=root))
-    try:
-        for rel, data in library.files.items():
-            path = arriving / rel
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(data)
-        objects = {o.id: o for o in read_manifest(arriving).objects}
-        for object_id, expected in library.hashes.items():
-            got = object_hash(arriving, objects[object_id])
-            if got != expected:
-                raise RuntimeError(f"library object {object_id!r} arrived from "
-                                   f"{library.driver_path} with content hash {got[:12]}, the "
-                                   f"driver's is {expected[:12]}")
-        (arriving / ".checked").write_text("")
-        try:
-            os.rename(arriving, folder)
-        except OSError:  # another worker on this node put it there first
-            pass
-    finally:
-        shutil.rmtree(arriving, ignore_errors=True)
-    return folder

@@ -53,6 +53,10 @@ def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
         return
     with _signals_held_during_start():
         if address:
+            # One line now, not minutes of ray.init retrying an address nothing answers at.
+            # Every trainer starts Ray before its command writes the run folder: nothing is
+            # recorded for a refused address.
+            cluster.check_ray_address(address, "--ray-address")
             ray.init(address=address, log_to_driver=False)
             cluster.joined_cluster = True
             return
