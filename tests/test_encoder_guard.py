@@ -96,3 +96,24 @@ def test_a_pointnet_from_before_the_gripper_frame_input_is_refused_by_name(tmp_p
                                          r"does not fit \(size mismatch for layers\.0\.0\.weight") as e:
         load_frozen_encoder(path)
     assert "\n" not in str(e.value)
+
+
+def test_a_weak_encoder_is_warned_about_once_per_content(tmp_path, capsys, monkeypatch):
+    """`make demo` loads its weak encoder three times (two of them the run folder's copy): one
+    warning, not three; another weak encoder still gets its own."""
+    import shutil
+
+    from corn_drake.rl import pretrained_encoders
+
+    monkeypatch.setattr(pretrained_encoders, "_warned", set())
+    weak = _export(tmp_path / "weak.pt", "corn", unseen_patch_f1=0.0)
+    copy = tmp_path / "run" / "encoder.pt"
+    copy.parent.mkdir()
+    shutil.copyfile(weak, copy)
+    for path in (weak, copy, weak):
+        load_encoder("corn", path, allow_weak=True)
+    assert capsys.readouterr().err.count("warning:") == 1
+    other = _export(tmp_path / "other.pt", "corn", unseen_patch_f1=0.1)
+    load_encoder("corn", other, allow_weak=True)
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and "other.pt" in err

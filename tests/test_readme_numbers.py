@@ -24,7 +24,7 @@ LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
 # documents and the logs that replaced the old results history).
 LINKED_PAGES = ("README.md", "docs/results/README.md", "docs/results/primitive/README.md",
                 "docs/guide.md", "CONTRIBUTING.md", "CHANGELOG.md", "experiments/LOG.md",
-                "experiments/primitive_policy/LOG.md")
+                "experiments/primitive_policy/LOG.md", "docs/results/demo/README.md")
 
 
 def _tables(text: str) -> list[list[list[str]]]:
@@ -153,3 +153,19 @@ def test_every_relative_link_resolves(page):
             headings = [line.lstrip("#") for line in resolved.read_text().splitlines()
                         if line.startswith("#")]
             assert anchor in {_slug(h) for h in headings}, f"{page}: no heading #{anchor} in {path_part}"
+
+
+DEMO_LINE = re.compile(r"from \*\*(\d\.\d\d)\*\* untrained to \*\*(\d\.\d\d)\*\* after ([\d,]+) "
+                       r"primitives")
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/results/README.md"])
+def test_the_demo_numbers_quote_its_summary(page):
+    """What a page says `make demo` printed is its recorded summary (docs/results/demo/)."""
+    summary = json.loads((RESULTS / "demo" / "demo_summary.json").read_text())
+    quoted = DEMO_LINE.findall((ROOT / page).read_text())
+    assert quoted, f"{page} quotes no demo result"
+    for untrained, trained, primitives in quoted:
+        assert float(untrained) == round(summary["success"]["untrained"], 2)
+        assert float(trained) == round(summary["success"]["trained"], 2)
+        assert int(primitives.replace(",", "")) == summary["train_primitives"]

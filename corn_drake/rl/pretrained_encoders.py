@@ -70,8 +70,27 @@ def check_pretrained(encoder, checkpoint, allow_weak: bool) -> None:
     if not allow_weak:
         raise InputError(f"--encoder {checkpoint} {why}: pretrain it longer, or pass "
                          "--allow-weak-encoder to train on it anyway")
-    print(f"warning: --encoder {checkpoint} {why}; used because --allow-weak-encoder is set",
-          file=sys.stderr)
+    if _first_warning(checkpoint, why):
+        print(f"warning: --encoder {checkpoint} {why}; used because weak encoders are allowed "
+              "(--allow-weak-encoder, or allow_weak_encoder in the run's config)", file=sys.stderr)
+
+
+# The weak encoders already warned about in this process, by content: a command that loads the
+# same encoder again (a run folder's copy of it included) says so once.
+_warned: set[tuple[str, str]] = set()
+
+
+def _first_warning(checkpoint, why: str) -> bool:
+    import hashlib
+
+    try:
+        key = (hashlib.sha256(Path(checkpoint).read_bytes()).hexdigest(), why)
+    except (OSError, TypeError):
+        key = (str(checkpoint), why)
+    if key in _warned:
+        return False
+    _warned.add(key)
+    return True
 
 
 def load_encoder(policy: str, checkpoint: str | Path | None,
