@@ -1,5 +1,5 @@
-"""`corn-drake demo` end to end at a small size (its default size takes ~10 minutes; what it
-prints there is in docs/results/README.md): every stage's output is there and holds what that
+"""`corn-drake demo` end to end at a small size (its default size takes 6-10 minutes; what it
+printed there is in docs/results/demo/): every stage's output is there and holds what that
 stage should have written, not just a file, and the three evaluations it compares ran the same
 episodes."""
 

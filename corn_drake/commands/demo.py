@@ -159,16 +159,12 @@ def policy_config(library: Path, args):
 
 
 def untrained_agent(cfg, encoder_file: Path):
-    """The weights the demo's training starts from: PrimitiveTrainer seeds torch with cfg.seed
-    and then builds its agent, as this does (a resumed demo's trainer holds trained ones)."""
-    import torch
-
+    """The weights the demo's training starts from (a resumed demo's trainer holds trained
+    ones), in eval mode."""
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive.agent import agent_for
+    from corn_drake.rl.primitive.trainer import initial_agent
 
-    encoder = load_encoder("corn", encoder_file, True)
-    torch.manual_seed(cfg.seed)
-    return agent_for(cfg, encoder).eval()
+    return initial_agent(cfg, load_encoder("corn", encoder_file, True)).eval()
 
 
 def train_policy(run_dir: Path, cfg, encoder_file: Path) -> dict:

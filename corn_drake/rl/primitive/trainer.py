@@ -47,12 +47,18 @@ CHECKPOINT_KEYS = ("policy", "agent", "learner", "global_step", "episodes", "his
                    "recent_episodes", "np_rng", "torch_rng", "replay_file")
 
 
+def initial_agent(cfg: PrimitiveTrainConfig, encoder):
+    """The weights a new run starts from: torch seeded with cfg.seed, then the untrained heads
+    (what `make demo` evaluates as the untrained policy)."""
+    torch.manual_seed(cfg.seed)
+    return agent_for(cfg, encoder)
+
+
 class PrimitiveTrainer:
     def __init__(self, cfg: PrimitiveTrainConfig, out: str | Path, encoder):
         self.cfg, self.out = cfg, Path(out)
-        torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
-        self.agent = agent_for(cfg, encoder)
+        self.agent = initial_agent(cfg, encoder)
         self.learner = TD3Learner(self.agent.actor, self.agent.critic, TD3Settings.for_run(cfg),
                                   device=training_device(cfg.device), seed=cfg.seed)
         self.replay = ReplayBuffer(cfg.replay_capacity)
