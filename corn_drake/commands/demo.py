@@ -1,4 +1,4 @@
-"""`corn-drake demo`: the pipeline end to end at a size that learns in about ten minutes on one
+"""`corn-drake demo`: the pipeline end to end at a size that learns in about 7 minutes on one
 CPU core, ending with a policy measurably better than the one it started from.
 
 1. object library: procedural objects, train and unseen families;
@@ -36,7 +36,7 @@ EVAL_SEED = 1000
 LOG_EVERY = 200
 
 NAME = "demo"
-HELP = ("learn a push policy end to end in about ten minutes on one core: library, contact "
+HELP = ("learn a push policy end to end in about 7 minutes on one core: library, contact "
         "data, pretraining, TD3 training; prints its success before and after")
 
 
@@ -78,8 +78,8 @@ def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    print("[demo] about ten minutes on one core; each stage's bar says what it has left",
-          flush=True)
+    print("[demo] about 7 minutes on one core (more beside other jobs); each stage's bar says "
+          "what it has left", flush=True)
 
     _stage("1/6 object library", t0)
     process = ProcessConfig()
