@@ -17,7 +17,6 @@ a killed demo resumes. demo_summary.json holds the numbers the last lines print.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
 from pathlib import Path
@@ -149,9 +148,10 @@ def policy_config(library: Path, args):
     from corn_drake.config.diagram_files import load_primitive_env_config
     from corn_drake.config.overrides import on_library
     from corn_drake.config.primitive import PrimitiveTrainConfig
+    from corn_drake.rl.checkpoints import OWN_ENCODER
 
     cfg = on_library(PrimitiveTrainConfig(env=load_primitive_env_config(TASK)), str(library))
-    cfg = dataclasses.replace(cfg, encoder="encoder.pt", allow_weak_encoder=True,
+    cfg = dataclasses.replace(cfg, encoder=OWN_ENCODER, allow_weak_encoder=True,
                               total_steps=args.train_steps, envs_per_worker=8,
                               log_every=LOG_EVERY, checkpoint_every=LOG_EVERY * 5, seed=args.seed)
     cfg.check()
@@ -171,20 +171,17 @@ def train_policy(run_dir: Path, cfg, encoder_file: Path) -> dict:
     """Trains (or resumes) the demo's run as `corn-drake train --policy primitive` does: the
     folder locked, its config and a copy of the encoder written, so it evaluates and ships on its
     own; a demo rerun with other arguments is refused, naming what differs. metrics.json's."""
-    import shutil
-
     from corn_drake.config.primitive import PrimitiveTrainConfig
+    from corn_drake.rl.checkpoints import keep_encoder_copy
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.rl.primitive.trainer import PrimitiveTrainer
     from corn_drake.run_folders.resumable import ResumableRun
-    from corn_drake.storage.atomic_files import atomic_path
 
     with ResumableRun.open(run_dir, PrimitiveTrainConfig) as run_folder:
         run_folder.refuse_changes(cfg, may_grow=("total_steps",), may_change=(),
                                   name=lambda field: f"demo setting {field}")
         if run_folder.is_new:
-            with atomic_path(run_dir / "encoder.pt") as tmp:
-                shutil.copyfile(encoder_file, tmp)
+            keep_encoder_copy(run_dir, encoder_file)
         trainer = PrimitiveTrainer(cfg, run_dir, load_encoder("corn", encoder_file, True))
         run_folder.write_config(cfg, f"task {TASK}, policy primitive, {cfg.total_steps} "
                                      "primitives")
@@ -226,13 +223,14 @@ def closing_lines(summary: dict, out: Path, run_dir: Path) -> list[str]:
     return [
         f"[demo] done in {summary['seconds'] / 60:.1f} min.",
         f"[demo] unseen success on the same {n} episodes ({len(summary['unseen_objects'])} "
-        f"unseen objects; success: within 5 cm of a goal 8-12 cm beyond the object): untrained {s['untrained']:.2f}, after "
+        f"unseen objects; success: within 5 cm of a goal 8-12 cm beyond the object): "
+        f"untrained {s['untrained']:.2f}, after "
         f"{summary['train_primitives']} primitives {s['trained']:.2f}, shipped {SHIPPED_POLICY} "
         f"{s['shipped']:.2f} -> {verdict}.",
         f"[demo] training success by primitives (the last 100 episodes, exploring): {shown}",
-        f"[demo] the shipped policy trained 12,000 primitives with a 6,000-step encoder and "
-        f"reaches 0.84 on the 200 fixed unseen episodes (docs/results/README.md); the untrained "
-        f"policy succeeds where a random push happens to leave the object within 5 cm.",
+        "[demo] the shipped policy trained 12,000 primitives with a 6,000-step encoder and "
+        "reaches 0.84 on the 200 fixed unseen episodes (docs/results/README.md); the untrained "
+        "policy succeeds where a random push happens to leave the object within 5 cm.",
         f"[demo] built: {out}/library (objects), contact_data, pretrain/corn/encoder.pt, "
         f"{run_dir} (the policy's run: checkpoints, tb/ for TensorBoard, "
         f"plots/learning_curve.png), eval_*.json, eval_trained_recordings/ (Meshcat HTML: open "

@@ -108,12 +108,9 @@ def _as_recorded_encoder(out, recorded: str, requested: str) -> str:
 
 
 def run(args) -> int:
-    import shutil
-    from pathlib import Path
-
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.checkpoints import run_encoder_path
+    from corn_drake.rl.checkpoints import keep_encoder_copy, run_encoder_path
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.rl.primitive.trainer import PrimitiveTrainer
     from corn_drake.run_folders.resumable import ResumableRun
@@ -132,14 +129,8 @@ def run(args) -> int:
         encoder_file = run_encoder_path(run_folder.out, cfg.encoder)
         encoder = load_encoder("corn", encoder_file, cfg.allow_weak_encoder)
         trainer = PrimitiveTrainer(cfg, run_folder.out, encoder)  # reads, writes nothing
-        if run_folder.is_new:
-            # The run folder keeps its own copy of the frozen encoder, named in its config, so
-            # it evaluates and ships without the file it was started from.
-            from corn_drake.storage.atomic_files import atomic_path
-
-            with atomic_path(Path(run_folder.out) / "encoder.pt") as tmp:
-                shutil.copyfile(encoder_file, tmp)
-            cfg.encoder = "encoder.pt"
+        if run_folder.is_new:  # the run keeps its own copy of the frozen encoder
+            cfg.encoder = keep_encoder_copy(run_folder.out, encoder_file)
         run_folder.write_config(cfg, f"task {cfg.env.task.name}, policy primitive, "
                                      f"{cfg.total_steps} primitives")
         with torch_threads(args.torch_threads):

@@ -20,6 +20,22 @@ def run_encoder_path(run_dir: str | Path, encoder: str) -> str:
     return str(found) if found is not None and found != Path(encoder) else encoder  # as given
 
 
+# What a primitive run folder calls its own copy of the frozen encoder (config `encoder`).
+OWN_ENCODER = "encoder.pt"
+
+
+def keep_encoder_copy(run_dir: str | Path, encoder_file: str | Path) -> str:
+    """Copies `encoder_file` into the run folder (atomically) so the run evaluates and ships
+    without the file it started from; returns the name its config records."""
+    import shutil
+
+    from corn_drake.storage.atomic_files import atomic_path
+
+    with atomic_path(Path(run_dir) / OWN_ENCODER) as tmp:
+        shutil.copyfile(encoder_file, tmp)
+    return OWN_ENCODER
+
+
 def run_relative_path(run_dir: str | Path, name: str) -> Path:
     """A file or folder a run's config names (its encoder, PrimitiveTrainConfig.agent_weights):
     relative to the run folder where it exists there, else as given."""
