@@ -169,6 +169,8 @@ ROWS = [
          "{root}/bad_type.yaml"),
     _row(f"bench learner {BENCH_REPORT} --batches 0,64", "--batches"),
     _row(f"bench learner {BENCH_REPORT} --policy nosuch", "--policy"),
+    _row(f"bench planner {BENCH_REPORT} --set planner.beam=0", "planner.beam"),
+    _row(f"bench planner {BENCH_REPORT} --set planner.policy=runs/none", "planner.policy"),
     _row(f"bench train {BENCH_REPORT} --envs-per-worker 0", "--envs-per-worker"),
     _row(f"bench train {BENCH_REPORT} --updates 0", "--updates"),
     _row(f"bench train {BENCH_REPORT} --warmup-updates -1", "--warmup-updates"),

@@ -93,4 +93,5 @@ def test_objects_command_summary_counts_unseen_by_group():
     groups = Counter(o.unseen_group for o in objects)
     summary = _split_summary(objects)
     assert summary.startswith(f"{groups[None]} train + {80 - groups[None]} unseen objects")
-    assert f"{groups['family']} family" in summary and f"{groups['member']} member" in summary
+    assert f"{groups['family']} of held-out families" in summary
+    assert f"{groups['member']} held-out members of seen families" in summary

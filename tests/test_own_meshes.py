@@ -69,6 +69,29 @@ def test_keep_size_keeps_what_fits_and_refuses_what_does_not(tmp_path, meshes, c
     assert "--keep-size" in capsys.readouterr().err
 
 
+def test_a_given_unit_overrides_the_size_guess(tmp_path, capsys):
+    """A 12 cm box written in centimetres ("12") reads as 1.2 cm in millimetres, and
+    --keep-size then refuses it as smaller than the pads; --unit cm keeps it at 12 cm."""
+    assert detect_unit(12.0, ".obj")[0] == "millimetres"
+    assert detect_unit(12.0, ".obj", "cm")[:2] == ("centimetres", 0.01)
+    assert detect_unit(8.0, ".glb", "mm")[0] == "millimetres"  # said beats the format's own
+    src = tmp_path / "meshes"
+    src.mkdir()
+    trimesh.creation.box([12.0, 8.0, 6.0]).export(src / "box_12cm.obj")
+    code, out, text = _ingest(tmp_path, src, capsys, "--keep-size", "--unit", "cm")
+    assert code == 0 and "read as centimetres (given by --unit)" in text
+    entry = json.loads((out / "manifest.json").read_text())["objects"][0]
+    assert entry["scale"]["unit"] == "centimetres" and entry["scale"]["kept_size"]
+    assert abs(entry["radius"] - 0.5 * (0.12 ** 2 + 0.08 ** 2 + 0.06 ** 2) ** 0.5) < 1e-3
+    # The same folder without --unit reads millimetres: too small to keep, rejected saying so;
+    # a folder none of whose meshes became an object is a failed command, not an empty success.
+    (tmp_path / "guess").mkdir()
+    code, _, text = _ingest(tmp_path / "guess", src, capsys, "--keep-size")
+    assert code == 2 and "read as millimetres, from its size" in text
+    assert main(["objects", "--unit", "cm", "--out", str(tmp_path / "p")]) == 2
+    assert "--unit cm" in capsys.readouterr().err
+
+
 def test_keep_size_is_for_mesh_folders_only(tmp_path, capsys):
     assert main(["objects", "--keep-size", "--out", str(tmp_path / "lib")]) == 2
     assert "--keep-size" in capsys.readouterr().err

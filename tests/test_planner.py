@@ -1,7 +1,9 @@
-"""The planning policy (rl/planner/): its env's snapshot / restore is exact for every primitive
-kind, each kind reaches its pre-contact pose on a box and does what it is for (a topple puts
-another face down, a turn turns more than it moves), the search spends the budget it says and
-reuses the level it already simulated, and `evaluate --run planner` refuses what it cannot do."""
+"""The 6D expert (rl/planner/): the env's snapshot / restore is exact for an exactly aimed
+primitive, each analytic kind reaches its pre-contact pose on a box and does what it is for (a
+topple puts another face down, a turn turns more than it moves), the search values a first
+primitive by r1 + discount x max r2 over a beam and spends the budget it says, its settings go
+through the common --set path, and `evaluate --run planner` reports, labels, resumes and
+refuses what it cannot do."""
 
 from __future__ import annotations
 
@@ -11,9 +13,11 @@ import pytest
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError
 from corn_drake.evaluation.planner_episodes import cloud_distance, wilson
-from corn_drake.rl.planner.kinds import Candidate, goal_errors, propose
-from corn_drake.rl.planner.search import (Node, Planner, PlannerConfig, PlannerEnv, beam_of,
-                                          budget, planner_settings, primitive_config)
+from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
+from corn_drake.rl.envs.branching import Candidate
+from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+from corn_drake.rl.planner.kinds import goal_errors, propose
+from corn_drake.rl.planner.search import Planner, budget
 from corn_drake.systems.primitive_executor import reachable_from_above
 from corn_drake.transforms import quat_wxyz_to_matrix
 
@@ -37,7 +41,11 @@ def _rx(a):
 @pytest.fixture(scope="module")
 def env():
     # The full6d env's own object: a 9 x 7 x 5 cm box.
-    return PlannerEnv(load_primitive_env_config("full6d"), primitive_config({}))
+    return PrimitiveEnv(load_primitive_env_config("full6d"), PlannerRunConfig().primitive)
+
+
+def _step(env, candidate: Candidate):
+    return env.step(candidate.action(), aim=candidate.aim)
 
 
 def _kind(env, obs, kind: str, goal) -> Candidate:
@@ -61,19 +69,19 @@ def test_a_snapshot_restore_round_trip_is_exact_for_an_exact_aim(env):
     obs, _ = env.reset(seed=2)
     topple = _kind(env, obs, "topple", _turned_goal(env.object_pose(), tip=np.pi / 2))
     start = env.snapshot()
-    first = env.step_candidate(topple)
-    after = (env.object_pose(), env.context.get_time(), env._steps, env.primitives)
+    first = _step(env, topple)
+    after = (env.object_pose(), env.context.get_time(), env.steps, env.primitives)
     env.restore(start)
-    env.step_candidate(_kind(env, obs, "push", _turned_goal(env.object_pose(),
+    _step(env, _kind(env, obs, "push", _turned_goal(env.object_pose(),
                                                              shift=(0.1, 0.0))))
     env.restore(start)
-    again = env.step_candidate(topple)
-    for a, b in zip(after, (env.object_pose(), env.context.get_time(), env._steps,
+    again = _step(env, topple)
+    for a, b in zip(after, (env.object_pose(), env.context.get_time(), env.steps,
                             env.primitives)):
         np.testing.assert_array_equal(a, b)
     assert again[1] == first[1]
     # The exact aim is the candidate's own point: the executor's pre-contact point sits off it.
-    np.testing.assert_array_equal(again[4]["primitive"][:3], topple.point)
+    np.testing.assert_array_equal(again[4]["primitive"][:3], topple.aim[0])
 
 
 def test_a_topple_reaches_its_pre_contact_pose_and_puts_another_face_down(env):
@@ -84,8 +92,8 @@ def test_a_topple_reaches_its_pre_contact_pose_and_puts_another_face_down(env):
     start = env.object_pose()
     up_before = quat_wxyz_to_matrix(start[3:])[:, 2]
     topple = _kind(env, obs, "topple", _turned_goal(start, tip=np.pi / 2))
-    assert topple.point[2] > obs["cloud"][:, 2].mean(), "a topple touches above the centre"
-    step = env.step_candidate(topple)
+    assert topple.aim[0][2] > obs["cloud"][:, 2].mean(), "a topple touches above the centre"
+    step = _step(env, topple)
     assert step[4]["reached"]
     up_after = quat_wxyz_to_matrix(env.object_pose()[3:])[:, 2]
     assert np.arccos(np.clip(up_before @ up_after, -1, 1)) > 1.0, "the same face is still down"
@@ -96,7 +104,7 @@ def test_a_turn_reaches_its_pre_contact_pose_and_turns_more_than_it_moves(env):
     start, snapshot = env.object_pose(), env.snapshot()
     goal = _turned_goal(start, yaw=0.8)
     turn = _kind(env, obs, "turn", goal)
-    step = env.step_candidate(turn)
+    step = _step(env, turn)
     assert step[4]["reached"]
     end = env.object_pose()
     yaw = goal_errors(start, end)["yaw"]  # the turn done, with its sign
@@ -104,10 +112,10 @@ def test_a_turn_reaches_its_pre_contact_pose_and_turns_more_than_it_moves(env):
     # Against a push through the centre of the same length from the same state: the turn must
     # turn the box (the right way, > 0.2 rad) and turn it per cm moved several times more.
     env.restore(snapshot)
-    push = _kind(env, obs, "push", _turned_goal(start, shift=-turn.normal[:2] * 0.1))
-    env.step_candidate(Candidate("push", push.index, push.point, push.normal,
-                                 push.motion / np.abs(push.motion).max()
-                                 * np.abs(turn.motion).max(), False))
+    normal = obs["normals"][turn.point] / np.linalg.norm(obs["normals"][turn.point])
+    push = _kind(env, obs, "push", _turned_goal(start, shift=-normal[:2] * 0.1))
+    _step(env, Candidate("push", push.point, push.motion / np.abs(push.motion).max()
+                         * np.abs(turn.motion).max()))
     push_end = env.object_pose()
     push_yaw = abs(goal_errors(start, push_end)["yaw"])
     push_moved = np.linalg.norm(push_end[:2] - start[:2])
@@ -120,7 +128,7 @@ def test_a_push_reaches_its_pre_contact_pose_and_moves_toward_the_goal(env):
     obs, _ = env.reset(seed=2)
     start = env.object_pose()
     goal = _turned_goal(start, shift=(0.0, -0.1))
-    step = env.step_candidate(_kind(env, obs, "push", goal))
+    step = _step(env, _kind(env, obs, "push", goal))
     assert step[4]["reached"]
     assert np.linalg.norm(env.object_pose()[:2] - goal[:2]) < 0.07
 
@@ -144,67 +152,134 @@ def test_topples_are_offered_only_when_the_goal_has_another_face_down():
     reach = np.ones(len(cloud), bool)
     same_face = propose(cloud, normals, pose, _turned_goal(pose, yaw=0.5, shift=(0.1, 0)),
                         0.15, reach)
-    assert {c.kind for c in same_face} == {"push", "turn"}
+    assert {c.source for c in same_face} == {"push", "turn"}
+    assert all(c.aim is None for c in same_face)  # aimed as every shipped push: lowered
     tipped = propose(cloud, normals, pose, _turned_goal(pose, tip=np.pi / 2), 0.15, reach)
-    topples = [c for c in tipped if c.kind == "topple"]
-    assert topples and all(c.exact for c in topples)
+    topples = [c for c in tipped if c.source == "topple"]
+    assert topples and all(c.aim is not None for c in topples)
     # Turned +90 deg about x: the body's +y side must come up, so the top goes toward -y.
-    assert all(c.motion[1] < 0 and c.point[2] > 0.035 for c in topples)
+    assert all(c.motion[1] < 0 and c.aim[0][2] > 0.035 for c in topples)
     # A turn's push closes the yaw error: its torque about the centre has the error's sign.
     for sign in (1, -1):
         turn = [c for c in propose(cloud, normals, pose, _turned_goal(pose, yaw=sign * 0.5),
                                    0.15, reach, ("turn",))][0]
-        r = turn.point[:2] - cloud[:, :2].mean(axis=0)
+        r = cloud[turn.point, :2] - cloud[:, :2].mean(axis=0)
         assert np.sign(r[0] * turn.motion[1] - r[1] * turn.motion[0]) == sign
     with pytest.raises(InputError, match="unknown primitive kind"):
         propose(cloud, normals, pose, pose, 0.15, reach, ("pivot",))
 
 
-def test_the_search_spends_its_budget_and_reuses_the_level_it_simulated(env):
-    config = PlannerConfig(per_kind=1, beam=2, depth=2, kinds="push,turn")
-    planner = Planner(config, env.primitive_cfg, env.cfg.task)
-    env.reset(seed=2)
-    planner.reset()
-    first = planner.act(env)[4]["planner"]
-    assert first["simulated"] == first["candidates"] * (1 + min(config.beam,
-                                                                first["candidates"]))
-    assert first["simulated"] <= budget(config) == 6
-    second = planner.act(env)[4]["planner"]
-    # Its first level was the chosen node's, already simulated: only the beam's children.
-    assert 0 < second["simulated"] <= config.beam * 2
-    depth_one = Planner(PlannerConfig(per_kind=1, depth=1, kinds="push,turn"),
-                        env.primitive_cfg, env.cfg.task)
-    env.reset(seed=2)
-    depth_one.reset()
-    decision = depth_one.act(env)[4]["planner"]
-    assert decision["simulated"] == decision["candidates"] == 2
+class _TreeEnv:
+    """A stand-in env for the search alone: its state is the sequence of points chosen so far,
+    a primitive's reward is REWARDS[state + (point,)] (0 where unlisted), and a point 9 ends
+    the episode. Snapshots are the state itself."""
+
+    REWARDS = {(0,): 1.0, (1,): 0.9, (2,): 0.5, (3,): 0.1,
+               (0, 0): -1.0, (0, 1): -2.0, (1, 2): 3.0, (2, 0): 9.0}
+
+    def __init__(self):
+        self.state = ()
+
+    def snapshot(self):
+        return self.state
+
+    def restore(self, snapshot):
+        self.state = snapshot
+
+    def step(self, action, aim=None):
+        self.state = self.state + (action["point"],)
+        done = action["point"] == 9
+        return ({"state": self.state}, self.REWARDS.get(self.state, 0.0), done, False,
+                {"status": {"success": 0.0}})
+
+    def object_pose(self):
+        return np.zeros(7)
+
+    def object_still(self):
+        return True
 
 
-def test_the_beam_keeps_the_best_of_each_kind_first():
-    def node(kind, score):
-        return Node(Candidate(kind, 0, np.zeros(3), np.zeros(3), np.zeros(3), False), None,
-                    None, score, False)
-
-    nodes = [node("turn", -1), node("turn", -2), node("push", -5), node("turn", -3)]
-    kept = beam_of(nodes, 2)
-    assert [n.candidate.kind for n in kept] == ["turn", "push"]
-    assert [n.score for n in beam_of(nodes, 3)] == [-1, -5, -2]
+def _tree_source(points):
+    def propose(env, obs, rng):
+        rng.uniform()  # a draw per expansion, as the policy source's random motions
+        return [Candidate("policy", p, np.zeros(3)) for p in points]
+    return propose
 
 
-def test_planner_settings_are_checked_in_one_line():
-    config, primitive, rest = planner_settings(["planner.beam=4", "primitive.push_height=0",
-                                                "task.episode_steps=50"])
-    assert config.beam == 4 and primitive == {"push_height": "0"}
-    assert rest == ["task.episode_steps=50"]
-    assert primitive_config(primitive).push_height == 0.0
-    with pytest.raises(InputError, match="no setting 'width'"):
-        planner_settings(["planner.width=3"])
-    with pytest.raises(InputError, match="planner.beam"):
-        planner_settings(["planner.beam=0"])
-    with pytest.raises(InputError, match="planner.kinds"):
-        planner_settings(["planner.kinds=push,pivot"])
-    with pytest.raises(InputError, match="no such setting"):
-        primitive_config({"speed": "1"})
+def test_the_search_values_a_first_primitive_by_r1_plus_discounted_best_r2_over_its_beam():
+    env = _TreeEnv()
+    # Depth 1: the most reward now (point 0).
+    one = Planner(PlannerConfig(depth=1), [_tree_source([0, 1, 2, 3])])
+    one.reset(0)
+    one.act(env, {})
+    assert env.state == (0,) and one.decisions[0]["simulated"] == 4
+    # Depth 2, beam 2: points 0 and 1 are valued (2 is outside the beam, though 0.5 + 0.9 x 9
+    # would win): 0 -> 1.0 + 0.9 x max(-1, -2, 0, 0) = 1.0, 1 -> 0.9 + 0.9 x 3 = 3.6.
+    env.restore(())
+    two = Planner(PlannerConfig(depth=2, beam=2, discount=0.9), [_tree_source([0, 1, 2, 3])])
+    two.reset(0)
+    two.act(env, {})
+    decision = two.decisions[0]
+    assert env.state == (1,) and np.isclose(decision["value"], 0.9 + 0.9 * 3.0)
+    assert decision["simulated"] == 4 + 2 * 4 == budget(two.config, 4)
+    values = [label[-1] for label in decision["labels"]]
+    assert values[2:] == [None, None] and np.isclose(values[0], 1.0)
+    # Beam 3 reaches point 2's continuation.
+    env.restore(())
+    wide = Planner(PlannerConfig(depth=2, beam=3), [_tree_source([0, 1, 2, 3])])
+    wide.reset(0)
+    wide.act(env, {})
+    assert env.state == (2,) and wide.decisions[0]["simulated"] == 4 + 3 * 4
+
+
+def test_an_ended_branch_is_valued_by_its_reward_alone_and_the_draws_follow_the_seed():
+    env = _TreeEnv()
+    env.REWARDS = {**_TreeEnv.REWARDS, (9,): 1.5}
+    planner = Planner(PlannerConfig(depth=2, beam=4), [_tree_source([9, 1])])
+    planner.reset(0)
+    planner.act(env, {})
+    # 9 ends the episode: valued 1.5, not expanded; 1 -> 0.9 + 0.9 x 0 = 0.9.
+    assert env.state == (9,) and planner.decisions[0]["simulated"] == 2 + 2
+    draws = []
+    for _ in range(2):
+        planner.reset(7)
+        draws.append(planner.rng.uniform())
+    assert draws[0] == draws[1] and draws[0] != np.random.default_rng(8).uniform()
+
+
+def test_planner_settings_go_through_the_common_set_path_in_one_line():
+    from corn_drake.rl.run_loading import LoadedRun
+
+    loaded = LoadedRun("planner", "planner", None, None, "planner")
+    run_cfg, changes = loaded.configure(None, ["planner.beam=3", "primitive.push_height=0",
+                                               "task.episode_steps=50",
+                                               "planner.sources=[policy, turn]"])
+    assert run_cfg.planner.beam == 3 and run_cfg.primitive.push_height == 0.0
+    assert run_cfg.env.task.episode_steps == 50
+    assert loaded.agent.config.sources == ["policy", "turn"]
+    assert {c.key for c in changes} == {"planner.beam", "primitive.push_height",
+                                        "env.task.episode_steps", "planner.sources"}
+    for sets, message in ((["planner.width=3"], "did you mean"),
+                          (["planner.beam=0"], "planner.beam must be"),
+                          (["planner.sources=[policy, pivot]"], "planner.sources must be"),
+                          (["planner.sources=[]"], "planner.sources must be non-empty"),
+                          (["planner.policy="], "planner.policy must be a run folder"),
+                          (["primitive.speed=1"], "unknown key"),
+                          (["ppo.lr=1"], "unknown key .ppo.; the run config has env, primitive, planner")):
+        with pytest.raises(InputError, match=message):
+            LoadedRun("planner", "planner", None, None, "planner").configure(None, sets)
+
+
+def test_every_named_source_is_registered_and_a_bad_policy_run_is_named():
+    from corn_drake.config.choices import PLANNER_SOURCES
+    from corn_drake.rl.planner.kinds import KINDS
+    from corn_drake.rl.planner.sources import SOURCES, load_policy
+
+    assert tuple(SOURCES) == PLANNER_SOURCES and set(KINDS) < set(SOURCES)
+    with pytest.raises(InputError, match="planner.policy: no run folder"):
+        load_policy("runs/nothing_here", None, None)
+    with pytest.raises(InputError, match="planner.policy: models/weights/push_state is a"):
+        load_policy("models/weights/push_state", None, None)
 
 
 def test_wilson_interval_and_the_cloud_distance():
@@ -243,15 +318,26 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
     library = write_loadable_library(tmp_path / "lib", 1, 1)
     report = tmp_path / "r.json"
     argv = ["evaluate", "--run", "planner", "--objects", str(library), "--split", "unseen",
-            "--episodes", "1", "--no-progress", "--set", "planner.per_kind=1", "--set",
-            "planner.depth=1", "--set", "primitive.max_primitives=2", "--report", str(report)]
+            "--episodes", "1", "--no-progress", "--set", "planner.sources=[push, turn]",
+            "--set", "planner.per_kind=1", "--set", "planner.depth=1", "--set",
+            "primitive.max_primitives=2", "--report", str(report)]
     assert main([*argv, "--record", "1"]) == 2  # no recordings yet: said, not skipped silently
     assert "--record 0" in capsys.readouterr().err and not report.exists()
     assert main([*argv, "--record", "0"]) == 0
     first = json.loads(report.read_text())
     assert first["privileged"] is True and first["episodes"][0]["failure"]
-    assert 1 <= first["simulated_per_decision"] <= first["budget_per_decision"] == 3
-    assert first["cpu_seconds_per_decision"] > 0
+    assert 1 <= first["simulated_per_decision"] <= first["budget_per_decision"] == 2
+    assert first["cpu_seconds_per_decision"] > 0 and first["decisions_per_core_hour"] > 0
+    # The labels: a header naming the columns, then one line per episode, a table per decision
+    # whose rows are the root candidates (the chosen one among them).
+    labels = report.with_name("r.labels.jsonl").read_text().splitlines()
+    header, episode = json.loads(labels[0]), json.loads(labels[1])
+    assert header["columns"][-2:] == ["reward", "value"] and len(labels) == 2
+    assert episode["seed"] == first["episodes"][0]["seed"]
+    assert len(episode["decisions"]) == first["episodes"][0]["primitives"]
+    for decision, made in zip(episode["decisions"], first["episodes"][0]["decisions"]):
+        assert len(decision["labels"]) == made["candidates"]
+        assert decision["labels"][decision["chosen"]][0] == made["source"]
     rows = report.with_suffix(".rows.jsonl")
     before = rows.read_text()
     assert main([*argv, "--record", "0"]) == 0
@@ -267,8 +353,9 @@ def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, ca
 
     library = write_loadable_library(tmp_path / "lib", 1, 1)
     common = ["evaluate", "--run", "planner", "--objects", str(library), "--split", "all",
-              "--record", "0", "--no-progress", "--set", "planner.per_kind=1", "--set",
-              "planner.depth=1", "--set", "primitive.max_primitives=1"]
+              "--record", "0", "--no-progress", "--set", "planner.sources=[push, turn]",
+              "--set", "planner.per_kind=1", "--set", "planner.depth=1", "--set",
+              "primitive.max_primitives=1"]
     assert main([*common, "--episodes", "1", "--report", str(tmp_path / "a.json")]) == 0
     assert main([*common, "--episodes-from", "1", "--episodes", "2",
                  "--report", str(tmp_path / "b.json")]) == 0

@@ -75,9 +75,18 @@ TABLETOP_ACROSS = (0.01, 1.0)
 UNITS = (("metres", 1.0), ("millimetres", 1e-3), ("centimetres", 1e-2))
 
 
-def detect_unit(size: float, suffix: str) -> tuple[str, float, str]:
+# `objects --unit`: the unit a user says its files are in, by its symbol.
+UNIT_SYMBOLS = {"m": "metres", "cm": "centimetres", "mm": "millimetres"}
+
+
+def detect_unit(size: float, suffix: str, given: str = "auto") -> tuple[str, float, str]:
     """(unit, metres per unit, how it was found) of a mesh whose largest extent is `size` in the
-    file's numbers; a file type whose format fixes the unit (glTF: metres) keeps it."""
+    file's numbers: the unit `given` by its symbol (UNIT_SYMBOLS), else a file type's own unit
+    (glTF: metres), else the first of UNITS that makes it a tabletop size. Why a user may say
+    it: a size fits more than one unit (a 40 cm box written as 40 reads as 4 cm in mm)."""
+    if given != "auto":
+        unit = UNIT_SYMBOLS[given]
+        return unit, dict(UNITS)[unit], "given by --unit"
     if suffix.lower() in (".glb", ".gltf"):
         return "metres", 1.0, "glTF's unit"
     lo, hi = TABLETOP_ACROSS

@@ -69,7 +69,7 @@ def size_rule(mesh: trimesh.Trimesh, suffix: str, cfg: ProcessConfig
     naming its real size and the range it misses; without it the mesh as loaded (the library
     rescales it whatever its unit)."""
     extents = np.ptp(mesh.vertices, axis=0)
-    unit, per_unit, how = detect_unit(float(extents.max()), suffix)
+    unit, per_unit, how = detect_unit(float(extents.max()), suffix, cfg.unit)
     radius = float(np.linalg.norm(mesh.vertices - mesh.center_mass, axis=1).max())
     rule = SizeRule(tuple(float(e) for e in extents), unit, per_unit, how, radius * per_unit,
                     cfg.keep_size)

@@ -29,6 +29,9 @@ class ProcessConfig:
     # paper's largest objects (0.3 m across), which already cover most of the 0.4 x 0.5 m table.
     keep_size: bool = False
     keep_size_radius: tuple[float, float] = (0.02, 0.15)
+    # `objects --unit`: the unit of the meshes' numbers (m, cm, mm), or "auto": read from each
+    # mesh's size (ingest.detect_unit).
+    unit: str = "auto"
     density: float = 300.0  # kg/m^3, the authors' DexGraspNet conversion
     cloud_points: int = 2048
     thin_ratio: float = 2.5

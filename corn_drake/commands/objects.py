@@ -63,6 +63,11 @@ def add_arguments(parser):
                              "instead of rescaling it to the library's 5-10 cm radius, where it "
                              "fits the gripper and table (radius 2-15 cm); a mesh that does not "
                              "is rejected, saying why")
+    parser.add_argument("--unit", choices=("auto", "m", "cm", "mm"), default="auto",
+                        help="mesh folders only: the unit of the meshes' numbers (default auto: "
+                             "read from each mesh's size, the first of metres, millimetres, "
+                             "centimetres that makes it 1 cm-1 m across, and said on screen); "
+                             "what --keep-size keeps, and what the manifest records")
     parser.add_argument("--out", required=True, help="library folder, e.g. data/library")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -80,16 +85,24 @@ def output_arguments(args) -> dict:
         recorded["--num-objects"] = args.num_objects
     else:
         recorded["--keep-size"] = bool(args.keep_size)
+        if args.unit != "auto":  # recorded only when given: libraries made before it resume
+            recorded["--unit"] = args.unit
     return recorded
 
 
+# How the summary names each unseen group (assets/splits.py's "family" and "member").
+UNSEEN_GROUP_WORDS = {"family": "of held-out families", "member": "held-out members of seen families"}
+
+
 def _split_summary(objects: list[LibraryObject]) -> str:
-    """'N train + M unseen objects (k family, l member)' : the unseen count by kind of novelty."""
+    """'N train + M unseen objects (k of held-out families, l held-out members of seen
+    families)': the unseen count by kind of novelty (assets/splits.py)."""
     from collections import Counter
 
     splits = Counter(o.split for o in objects)
     groups = Counter(o.unseen_group for o in objects if o.split == "unseen")
-    kinds = ", ".join(f"{n} {g}" for g, n in sorted(groups.items(), key=lambda kv: str(kv[0])))
+    kinds = ", ".join(f"{n} {UNSEEN_GROUP_WORDS.get(g, g)}"
+                      for g, n in sorted(groups.items(), key=lambda kv: str(kv[0])))
     return (f"{splits['train']} train + {splits['unseen']} unseen objects"
             + (f" ({kinds})" if kinds else ""))
 
@@ -124,6 +137,9 @@ def run(args) -> int:
     if args.keep_size and args.source == "procedural":
         raise InputError("--keep-size keeps the real size of the meshes of a --source folder; "
                          "procedural shapes have no real size (leave --keep-size out)")
+    if args.unit != "auto" and args.source == "procedural":
+        raise InputError(f"--unit {args.unit} says the unit of a --source folder's meshes; "
+                         "procedural shapes are made in metres (leave --unit out)")
     if args.workers > 1 and args.source != "procedural":  # refused, not silently serial
         raise InputError(f"--workers {args.workers} builds procedural objects side by side; "
                          f"--source {args.source} ingests its meshes one by one (leave "
@@ -132,6 +148,7 @@ def run(args) -> int:
     cfg.drops.drops = args.drops
     cfg.decomposition.max_convex_hull = args.max_hulls
     cfg.keep_size = args.keep_size
+    cfg.unit = args.unit
     with lock_folder(args.out):
         resume_arguments(args.out, output_arguments(args), may_grow=("--num-objects",),
                          renamed=RECORDED_RENAMES)
@@ -148,6 +165,11 @@ def run(args) -> int:
     print("\n".join(_stable_pose_summary(manifest.objects)))
     for r in manifest.rejected:
         print(f"  rejected {r.source}: {r.reason}")
+    if not manifest.objects and manifest.rejected:
+        # Every mesh refused: a library of nothing is no result (the reasons are listed above).
+        raise InputError(f"--source {args.source}: none of its {len(manifest.rejected)} meshes "
+                         f"became an object (each rejection is listed above); {args.out} holds "
+                         "no object to train or evaluate on")
     splits = {o.split for o in manifest.objects}
     if manifest.objects and len(splits) == 1:  # e.g. a folder of a few meshes: all train
         print(f"every object is {splits.pop()}: evaluate them with `corn-drake evaluate --objects "

@@ -32,3 +32,7 @@ PRIMITIVE_CHOOSERS = ("critic", "outcome_model")
 # What an outcome model reads of each candidate (rl/primitive/outcome/model.INPUT_KINDS, the
 # same names): its own numbers, or object-relative ones (`corn-drake fit-outcome --inputs`).
 OUTCOME_INPUT_KINDS = ("raw", "box_contact")
+# Where the 6D expert's candidate primitives come from (config/planner.PlannerConfig.sources;
+# rl/planner/sources.SOURCES registers one function per name): a learned primitive run's own
+# candidates, or an analytic kind (rl/planner/kinds.py).
+PLANNER_SOURCES = ("policy", "push", "turn", "topple")

@@ -1,5 +1,5 @@
-"""`corn-drake evaluate --run planner`: the planning policy (rl/planner/) on evaluate's fixed
-episodes, resumable and splittable by episode range.
+"""`corn-drake evaluate --run planner`: the 6D expert (rl/planner/) on evaluate's fixed
+episodes, resumable and splittable by episode range; its labels kept beside the rows.
 
 Episode k is evaluate's episode k (its object ids[k % len(ids)], seeded episode_seed(seed,
 object, k // len(ids)), the env's seed the base seed as policy_env sets it), so a planner report
@@ -10,9 +10,12 @@ the episodes already there, and `--episodes-from A --episodes N` plays only k in
 concatenate). The report is rewritten after every episode.
 
 Each row adds to evaluate's: the planner's decisions (simulated primitives and CPU seconds
-each, the kinds chosen) and HACMan's criterion beside the task's success (`hacman_success`: the
-mean distance between the object's cloud points at the end and at the goal under 3 cm, the
-object at rest).
+each, the sources chosen) and HACMan's criterion beside the task's success (`hacman_success`:
+the mean distance between the object's cloud points at the end and at the goal under 3 cm, the
+object at rest). What every decision's search found of each root candidate (its reward and,
+in the beam, its value: search.label_of) goes to REPORT.labels.jsonl, one line per episode
+(its first line: the settings and the columns), written before the episode's row: the labels a
+learned chooser is fitted to, kept out of the report.
 """
 
 from __future__ import annotations
@@ -47,20 +50,23 @@ def cloud_distance(cloud_world: np.ndarray, pose, goal) -> float:
 
 
 def play(env, planner, seed: int) -> dict:
-    """One episode of `planner` on `env` (a PlannerEnv) from its start; the report row."""
+    """One episode of `planner` on `env` (a PrimitiveEnv with no policy inside) from its start
+    (the search's draws seeded by the episode's seed); the report row, its decisions' labels
+    under "labels"."""
     obs, info = env.reset(seed=seed)
-    planner.reset()
+    planner.reset(seed)
     start = env.object_pose()
     status, sim_error, started = info["status"], None, time.process_time()
     while True:
-        obs, _, terminated, truncated, info = planner.act(env)
+        obs, _, terminated, truncated, info = planner.act(env, obs)
         status, sim_error = info.get("status", status), info.get("sim_error")
         if terminated or truncated:
             break
     end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
-    decisions = planner.decisions
+    labels = [{"chosen": d["chosen"], "labels": d["labels"]} for d in planner.decisions]
+    decisions = [{k: v for k, v in d.items() if k != "labels"} for d in planner.decisions]
     distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
-    row = {"success": bool(status.get("success", 0) > 0), "steps": int(env._steps),
+    row = {"success": bool(status.get("success", 0) > 0), "steps": int(env.steps),
            "primitives": len(decisions),
            "position_error": status.get("position_error"),
            "orientation_error": status.get("orientation_error"), "sim_error": sim_error,
@@ -69,10 +75,10 @@ def play(env, planner, seed: int) -> dict:
            "hacman_distance": distance,
            "hacman_success": bool(distance is not None and distance < HACMAN_DISTANCE_M
                                   and at_rest(env.object_speed())),
-           "kinds_chosen": dict(Counter(d["kind"] for d in decisions)),
+           "kinds_chosen": dict(Counter(d["source"] for d in decisions)),
            "simulated": int(sum(d["simulated"] for d in decisions)),
            "cpu_seconds": float(time.process_time() - started),
-           "decisions": decisions}
+           "decisions": decisions, "labels": labels}
     row["failure"] = failure_category(row, env.teacher_cfg.task)
     return row
 
@@ -174,6 +180,8 @@ def report_of(rows: list[dict], task, requested: range, facts: dict) -> dict:
             "cpu_seconds_per_decision": float(np.mean([d["cpu_seconds"] for d in decisions]))
             if decisions else None,
             "cpu_seconds": float(sum(r["cpu_seconds"] for r in rows)),
+            "decisions_per_core_hour": 3600.0 * len(decisions) / sum(
+                r["cpu_seconds"] for r in rows) if decisions else None,
             "kinds_chosen": dict(sum((Counter(r["kinds_chosen"]) for r in rows), Counter())),
             "episodes_from": requested.start, "episodes_requested": len(requested),
             "complete": n == len(requested), "episodes": rows}
@@ -195,7 +203,8 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     round-robin over `objects` [(id, ObjectSpec)] in `cfg`'s env, resuming REPORT.rows.jsonl."""
     from tqdm import tqdm
 
-    from corn_drake.rl.planner.search import Planner, PlannerEnv
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+    from corn_drake.rl.planner.search import LABEL_COLUMNS
 
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
@@ -207,11 +216,14 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
                 "objects": [o for o, _ in objects]}
     settings = json.loads(json.dumps(settings))  # as it reads back
     rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
+    labels_path = report_path.with_name(report_path.stem + ".labels.jsonl")
     rows = [r for r in _read_rows(rows_path, settings) if r["episode"] in episodes]
     if not rows_path.exists():
         _append(rows_path, {"settings": settings})
+    if not labels_path.exists():
+        _append(labels_path, {"settings": settings, "columns": LABEL_COLUMNS})
     done = {r["episode"] for r in rows}
-    envs, planner = {}, Planner(policy.config, policy.primitive, cfg.task)
+    envs, planner = {}, policy.planner(cfg.task)
     bar = tqdm(total=len(episodes), initial=len(done), desc="episodes", unit="episode",
                disable=not progress)
     for k in episodes:
@@ -219,10 +231,14 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
             continue
         object_id, spec = objects[k % len(objects)]
         if object_id not in envs:
-            envs = {object_id: PlannerEnv(cfg, policy.primitive, spec)}  # one env alive
+            envs = {object_id: PrimitiveEnv(cfg, policy.primitive, spec)}  # one env alive
         seed_k = episode_seed(seed, object_id, k // len(objects))
         row = {"episode": k, "object": object_id, "seed": seed_k,
                **play(envs[object_id], planner, seed_k)}
+        # The labels first: a kill between the two lines replays the episode, and a reader
+        # keeps an episode's last labels line.
+        _append(labels_path, {"episode": k, "object": object_id, "seed": seed_k,
+                              "decisions": row.pop("labels")})
         _append(rows_path, row)
         rows.append(row)
         write_json(report_path, report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task,

@@ -84,15 +84,15 @@ class LoadedRun:
             self.agent = getattr(scripted, REFERENCES[self.run])(run_cfg.env.controller)
         elif self.kind == "planner":
             from corn_drake.config.diagram_files import load_primitive_env_config
-            from corn_drake.rl.planner.search import (PlannerPolicy, planner_settings,
-                                                      primitive_config)
+            from corn_drake.config.planner import PlannerRunConfig
+            from corn_drake.rl.planner.search import PlannerPolicy
 
-            # planner.* and primitive.* are the planner's; the rest change the env, whose
+            # env (--task, task.* ...), primitive.* and planner.* through the common path; the
             # default task is the paper's 6D task on the primitive policies' env layer.
-            planner, primitive, rest = planner_settings(sets)
-            base = TrainConfig(env=load_primitive_env_config(task or "full6d"))
-            run_cfg = apply_sets(base, rest, only="env")
-            self.agent = PlannerPolicy(planner, primitive_config(primitive))
+            base = PlannerRunConfig(env=load_primitive_env_config(task or "full6d"))
+            run_cfg = apply_sets(base, sets, only=("env", "primitive", "planner"))
+            run_cfg.check()
+            self.agent = PlannerPolicy(run_cfg.planner, run_cfg.primitive)
         elif self.kind == "primitive":
             base = self.config
             run_cfg = primitive_run_on(base, task, sets)

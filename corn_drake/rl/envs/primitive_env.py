@@ -126,9 +126,10 @@ class PrimitiveEnv(DiagramEnv):
         self.primitives = 0
         return super().reset(seed=seed, options=options)
 
-    def step(self, action=None):
+    def step(self, action=None, aim: tuple | None = None):
         """One primitive (see the module docstring); with the policy inside the diagram, one
-        policy period (action None), as TeacherEnv."""
+        policy period (action None), as TeacherEnv. `aim` ((point, normal) in the world): aim
+        the primitive exactly there instead of at `aim(obs, point)` (a planner's topple)."""
         if self._agent_inside:
             obs, reward, terminated, truncated, info = super().step(action)
             status = self.executor_status()
@@ -143,8 +144,9 @@ class PrimitiveEnv(DiagramEnv):
         obs = self._observation()
         status = obs["executor"]
         sequence = int(round(status[STATUS_LAYOUT["count"]])) + 1
-        aim, normal = self._aim(obs, point)
-        primitive = make_primitive(aim, normal, motion, point, sequence)
+        target, normal = self.aim(obs, point) if aim is None else \
+            (np.asarray(aim[0], float), np.asarray(aim[1], float))
+        primitive = make_primitive(target, normal, motion, point, sequence)
         self._primitive_port.FixValue(self.context, primitive)
         distance_before = self.keypoint_distance()
         total, ticks = 0.0, 0
@@ -176,9 +178,9 @@ class PrimitiveEnv(DiagramEnv):
             reward += self.cfg.task.success_reward
         return obs, reward, terminated, truncated, info
 
-    def _aim(self, obs: dict, point: int) -> tuple[np.ndarray, np.ndarray]:
+    def aim(self, obs: dict, point: int) -> tuple[np.ndarray, np.ndarray]:
         """(point, normal) the primitive aims at for cloud point `point`: low_push's choice
-        (a planner's topple, rl/planner/search.py, aims exactly instead)."""
+        (a planner's topple, rl/planner/kinds.py, passes step() an exact aim instead)."""
         return push_contact(obs["cloud"], obs["normals"], point, self.primitive_cfg)
 
     def _success_waits(self, info: dict) -> bool:
@@ -186,7 +188,7 @@ class PrimitiveEnv(DiagramEnv):
         episode's periods not yet spent."""
         status = info["status"]
         return self.primitive_cfg.success_at_rest and status["success"] > 0 and \
-            status["out_of_workspace"] <= 0 and self._steps < self.cfg.task.episode_steps
+            status["out_of_workspace"] <= 0 and self.steps < self.cfg.task.episode_steps
 
     def object_still(self) -> bool:
         """The object moves slower than PrimitiveConfig's rest speeds (linear and angular)."""
@@ -201,7 +203,7 @@ class PrimitiveEnv(DiagramEnv):
         if status["success"] > 0 and not (idle and self.object_still()):
             status["success"] = 0.0
         terminated = status["success"] > 0 or status["out_of_workspace"] > 0
-        truncated = not terminated and self._steps >= self.cfg.task.episode_steps
+        truncated = not terminated and self.steps >= self.cfg.task.episode_steps
         return terminated, truncated
 
     def _counters(self) -> dict:

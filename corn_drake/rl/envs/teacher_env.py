@@ -100,6 +100,15 @@ class DiagramEnv(gym.Env):
         return {}
 
     # --- shared ------------------------------------------------------------------------------
+    def observation(self):
+        """The observation of the env's state now (what reset and step return)."""
+        return self._observation()
+
+    @property
+    def steps(self) -> int:
+        """Policy periods played this episode."""
+        return self._steps
+
     @property
     def plant_context(self):
         """The plant's context inside the simulator's root context."""

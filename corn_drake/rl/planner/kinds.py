@@ -17,20 +17,23 @@ through the controller; what a kind chooses is the contact and the motion:
           TILTED_RAD from vertical); the push goes the way that brings that axis up. Aimed at
           the point's own height (`exact`: never lowered, a low push would slide it).
 
-Ranked proposals per kind; the search (rl/planner/search.py) takes the first `per_kind` of each.
-Plain numpy: the tests drive it on a box without a simulator.
+Each kind is one function of the object's state (`Scene`) that returns its candidates best
+first, registered in KINDS; rl/planner/sources.py offers each as a candidate source, which takes
+the first `per_kind`. A new kind is one function here. Plain numpy: the tests drive it on a box
+without a simulator.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from corn_drake.errors import InputError
+from corn_drake.rl.envs.branching import Candidate
 from corn_drake.transforms import quat_wxyz_to_matrix
 
-KINDS = ("push", "turn", "topple")
 # Side faces: a normal at least this horizontal (|n_xy| / |n|), as low_push's HORIZONTAL_MIN.
 SIDE = 0.7
 # The goal's face counts as down when the axis that must point up is within this of vertical
@@ -39,20 +42,6 @@ TILTED_RAD = 0.5
 # The hand starts pre_contact_distance off the surface; the fingers are ~1 cm thick, so it
 # travels this much before it touches: added to every push's length.
 GAP = 0.03
-
-
-@dataclass(frozen=True)
-class Candidate:
-    kind: str
-    index: int  # the cloud point (the env's action names it)
-    point: np.ndarray  # world (3,)
-    normal: np.ndarray  # outward unit normal, world (3,)
-    motion: np.ndarray  # (3,) in [-1, 1], times push_distance
-    exact: bool  # aim at `point` itself (not lowered toward push_height)
-
-    def describe(self) -> dict:
-        return {"kind": self.kind, "index": self.index,
-                "motion": [round(float(m), 4) for m in self.motion]}
 
 
 def goal_errors(pose, goal) -> dict:
@@ -101,8 +90,102 @@ def _through_centre(cloud, normals, centre, u, usable, height=None) -> np.ndarra
     return order[facing[order]]
 
 
+@dataclass
+class Scene:
+    """What every kind reads: the object's cloud and outward unit normals (N, 3, world), which
+    points are usable (a side face the hand can reach from above), the cloud's centre, what is
+    left to do (goal_errors) and the executor's push_distance."""
+    cloud: np.ndarray
+    normals: np.ndarray
+    usable: np.ndarray
+    centre: np.ndarray
+    errors: dict
+    push_distance: float
+
+    @classmethod
+    def of(cls, cloud, normals, pose, goal, push_distance: float, reachable) -> "Scene":
+        cloud, normals = np.asarray(cloud, float), np.asarray(normals, float)
+        unit = normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-9)[:, None]
+        return cls(cloud, unit, _side(normals) & np.asarray(reachable, bool), cloud.mean(axis=0),
+                   goal_errors(pose, goal), push_distance)
+
+    @property
+    def shift(self) -> float:
+        return float(np.linalg.norm(self.errors["shift"]))
+
+    def candidate(self, kind, index, direction, length, exact=False) -> Candidate:
+        index = int(index)
+        aim = (self.cloud[index].copy(), self.normals[index].copy()) if exact else None
+        return Candidate(kind, index, _motion(direction, length, self.push_distance), aim)
+
+
+def push(scene: Scene) -> list[Candidate]:
+    """Through the centre toward the goal: the full distance, then half (a push also turns the
+    object: short of the goal is often closer in the task's terms), then the full one from the
+    next-best distinct point. One push reaches at most push_distance."""
+    if scene.shift <= 1e-3:
+        return []
+    u = np.append(_unit(scene.errors["shift"]), 0.0)
+    order = _through_centre(scene.cloud, scene.normals, scene.centre, u, scene.usable)
+    full = min(scene.shift + GAP, scene.push_distance)
+    return [scene.candidate("push", order[_distinct(order, scene.cloud, rank)], u[:2],
+                            fraction * full)
+            for fraction, rank in ((1.0, 0), (0.5, 0), (1.0, 1)) if rank < len(order)]
+
+
+def turn(scene: Scene) -> list[Candidate]:
+    """An offset push with the largest lever about the vertical through the centre, in the
+    sense that closes the yaw error: the arc the error asks for, then half of it, then the full
+    arc from the next-best distinct point."""
+    yaw = scene.errors["yaw"]
+    if abs(yaw) <= 1e-3:
+        return []
+    r = scene.cloud[:, :2] - scene.centre[:2]
+    inward = -scene.normals[:, :2]
+    torque = r[:, 0] * inward[:, 1] - r[:, 1] * inward[:, 0]  # z of r x f, f unit
+    lever = np.sign(yaw) * torque
+    order = np.argsort(-lever)
+    order = order[scene.usable[order] & (lever[order] > 0.01)]
+    out = []
+    for fraction, rank in ((1.0, 0), (0.5, 0), (1.0, 1)):
+        if rank < len(order):
+            i = order[_distinct(order, scene.cloud, rank)]
+            arc = abs(yaw) * max(lever[i], 0.02)
+            out.append(scene.candidate("turn", i, inward[i], fraction * arc + GAP))
+    return out
+
+
+def topple(scene: Scene) -> list[Candidate]:
+    """High on the side, pushed horizontally across the object's width and a bit (past the
+    tipping point), aimed exactly; only when the goal has another face down. The top moves
+    away from where the axis to raise points now: a tip about the horizontal axis up_now x z
+    brings up_now to vertical."""
+    errors = scene.errors
+    if errors["tilt"] <= TILTED_RAD:
+        return []
+    away = -errors["up_now"][:2]
+    toward = _unit(errors["shift"]) if scene.shift > 1e-3 else np.array([1.0, 0.0])
+    directions = [_unit(away)] if np.linalg.norm(away) > 0.2 else [toward, -toward]
+    top = scene.cloud[:, 2].max()
+    height = scene.centre[2] + 0.5 * (top - scene.centre[2])
+    out = []
+    for u2 in directions:
+        order = _through_centre(scene.cloud, scene.normals, scene.centre, np.append(u2, 0.0),
+                                scene.usable, height)
+        if len(order):
+            width = np.ptp(scene.cloud[:, :2] @ u2)
+            out += [scene.candidate("topple", order[0], u2, fraction * (width + 2 * GAP), True)
+                    for fraction in (1.0, 0.6)]
+    return out
+
+
+# The analytic kinds, by name (config/choices.PLANNER_SOURCES lists them beside "policy").
+KINDS: dict[str, Callable[[Scene], list[Candidate]]] = {"push": push, "turn": turn,
+                                                         "topple": topple}
+
+
 def propose(cloud, normals, pose, goal, push_distance: float, reachable: np.ndarray,
-            kinds=KINDS, per_kind: int = 3) -> list[Candidate]:
+            kinds=tuple(KINDS), per_kind: int = 3) -> list[Candidate]:
     """Up to `per_kind` candidates of each of `kinds`, best first within a kind (kinds
     interleaved: push 1, turn 1, topple 1, push 2, ...). `cloud`, `normals`: (N, 3) world;
     `reachable`: (N,) the points whose pre-contact point the hand can reach from above."""
@@ -110,61 +193,9 @@ def propose(cloud, normals, pose, goal, push_distance: float, reachable: np.ndar
         if kind not in KINDS:
             raise InputError(f"planner: unknown primitive kind {kind!r} (known: "
                              f"{', '.join(KINDS)})")
-    cloud, normals = np.asarray(cloud, float), np.asarray(normals, float)
-    unit_normals = normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-9)[:, None]
-    usable = _side(normals) & np.asarray(reachable, bool)
-    centre = cloud.mean(axis=0)
-    err = goal_errors(pose, goal)
-    shift = float(np.linalg.norm(err["shift"]))
-    by_kind: dict[str, list[Candidate]] = {k: [] for k in kinds}
-
-    def add(kind, index, direction, length, exact=False):
-        by_kind[kind].append(Candidate(kind, int(index), cloud[index].copy(),
-                                       unit_normals[index].copy(),
-                                       _motion(direction, length, push_distance), exact))
-
-    if "push" in kinds and shift > 1e-3:
-        u = np.append(_unit(err["shift"]), 0.0)
-        order = _through_centre(cloud, normals, centre, u, usable)
-        # The full distance, then half (a push also turns the object: short of the goal is
-        # often closer in the task's terms), then the same from the next-best distinct point.
-        # One push reaches at most push_distance: half of what it can reach is the variant.
-        full = min(shift + GAP, push_distance)
-        for scale, rank in ((1.0, 0), (0.5, 0), (1.0, 1)):
-            if rank < len(order):
-                add("push", order[_distinct(order, cloud, rank)], u[:2], scale * full)
-    if "turn" in kinds and abs(err["yaw"]) > 1e-3:
-        r = cloud[:, :2] - centre[:2]
-        inward = -unit_normals[:, :2]
-        torque = r[:, 0] * inward[:, 1] - r[:, 1] * inward[:, 0]  # z of r x f, f unit
-        lever = np.sign(err["yaw"]) * torque
-        order = np.argsort(-lever)
-        order = order[usable[order] & (lever[order] > 0.01)]
-        for scale, rank in ((1.0, 0), (0.5, 0), (1.0, 1)):
-            if rank < len(order):
-                i = order[_distinct(order, cloud, rank)]
-                arc = abs(err["yaw"]) * max(lever[i], 0.02)
-                add("turn", i, inward[i], scale * arc + GAP)
-    if "topple" in kinds and err["tilt"] > TILTED_RAD:
-        # The top moves away from where the axis to raise points now (rl/planner docs): a tip
-        # about the horizontal axis up_now x z brings up_now to vertical.
-        away = -err["up_now"][:2]
-        directions = [_unit(away)] if np.linalg.norm(away) > 0.2 else \
-            [_unit(err["shift"]) if shift > 1e-3 else np.array([1.0, 0.0]),
-             -_unit(err["shift"]) if shift > 1e-3 else np.array([-1.0, 0.0])]
-        top = cloud[:, 2].max()
-        height = centre[2] + 0.5 * (top - centre[2])
-        for u2 in directions:
-            order = _through_centre(cloud, normals, centre, np.append(u2, 0.0), usable, height)
-            if len(order):
-                # Across the object's width and a bit: past the tipping point.
-                width = np.ptp(cloud[:, :2] @ u2)
-                for scale in (1.0, 0.6):
-                    add("topple", order[0], u2, scale * (width + 2 * GAP), exact=True)
-    out = []
-    for rank in range(per_kind):
-        out += [c[rank] for c in by_kind.values() if rank < len(c)]
-    return out
+    scene = Scene.of(cloud, normals, pose, goal, push_distance, reachable)
+    by_kind = [KINDS[kind](scene)[:per_kind] for kind in kinds]
+    return [c[rank] for rank in range(per_kind) for c in by_kind if rank < len(c)]
 
 
 def _distinct(order: np.ndarray, cloud: np.ndarray, rank: int, apart: float = 0.02) -> int:

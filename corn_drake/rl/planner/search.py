@@ -1,25 +1,28 @@
-"""A planning policy with the simulator as its model: at every decision it simulates candidate
-primitives (rl/planner/kinds.py) from the env's own state (snapshot / restore), searches
-`depth` primitives deep, executes the first primitive of the best sequence and replans.
+"""The 6D expert: at every decision a beam search over simulated primitives from the env's own
+state (snapshot / restore), whose candidates come from planner.sources (rl/planner/sources.py);
+it executes the first primitive of the best sequence and searches again from where it landed.
 
 Privileged: it knows the object (its mesh in the simulator, mass, friction, the goal), so it is
-an upper reference for what these primitives can do, not a deployable policy; its reports say
-`privileged: true`.
+the teacher whose labels a learned policy is fitted to, not a deployable policy; its reports
+say `privileged: true`.
 
-Why beam search: each node costs one simulated primitive (~0.5-1.5 s of CPU), so the search
-must be cheap and its cost known in advance; a beam's cost is fixed by one setting
-(per decision at most candidates + (depth - 1) x beam x candidates primitives), it is anytime
-(level 1 alone is already the one-step lookahead, every level only refines it), and it needs
-no value function, where MCTS would need rollouts or a value estimate to beat it at this budget.
-The chosen first primitive's subtree is kept: the next decision starts from exactly the state
-the search already reached (restore is exact: tests/test_planner.py), so its first level costs
-nothing and each later decision simulates only beam x candidates primitives at depth 2.
-
-A sequence's score is the task's own: success under the task's rule anywhere along it
-dominates (SUCCESS); then minus the goal distance in tolerances, position_error /
-success_position + orientation_error / success_orientation, at its best node (a replanning
-policy keeps whichever prefix is best); leaving the workspace or a failed simulation scores
-FAILED.
+The search (PlannerConfig's depth D, beam B, discount g; every node expanded through the one
+expansion rl/envs/branching.simulate):
+  - the root's candidates are simulated; at depth 1 the one with the most reward is executed;
+  - otherwise the B root children with the most reward are valued
+        value(n) = r(n) + g x max over n's children c of value(c)
+    where n's children are the candidates proposed at the state n reached, simulated from it,
+    and only the B most rewarding of them are valued further (a child at the last level, or
+    one whose episode ended, is valued by its reward alone); the most valuable of the B is
+    executed (the first on a tie, so the one with the higher reward).
+A decision costs C + B C + B^2 C + ... (D terms) simulated primitives for C candidates per
+state. Why a beam valued by reward: every node costs one simulated primitive (~0.3 s of CPU),
+so the cost must be fixed by the settings; the reward is the one the learned candidates were
+trained on; and this exact search, with the shipped full6d_outcome run's candidates, made
+18 / 20 and 30 / 40 of the first fixed full6d episodes where one step made 13 / 20 and 21 / 40
+(docs/results/planner/README.md). Nothing is reused between decisions: the next decision
+proposes anew from the state reached, so each is the same function of its state and the
+episode's generator (what a label records).
 """
 
 from __future__ import annotations
@@ -30,242 +33,116 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from corn_drake.config.bounds import check_bounds
+from corn_drake.config.planner import PlannerConfig
 from corn_drake.config.primitive import PrimitiveConfig
-from corn_drake.errors import InputError
-from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-from corn_drake.rl.planner.kinds import KINDS, Candidate, propose
-from corn_drake.systems.primitive_executor import reachable_from_above
+from corn_drake.rl.envs.branching import Branch, best, simulate
+from corn_drake.rl.planner.sources import make_sources, propose_all
 
-SUCCESS = 1e3
-FAILED = -1e3
-
-
-@dataclass
-class PlannerConfig:
-    """The planner's budget (`--set planner.FIELD=VALUE`): per decision at most
-    per_kind x kinds + (depth - 1) x beam x per_kind x kinds simulated primitives."""
-    BOUNDS = {"per_kind": ">= 1", "beam": ">= 1", "depth": "[1, 4]", "kinds": "text"}
-    per_kind: int = 2
-    beam: int = 3
-    depth: int = 2
-    kinds: str = "push,turn,topple"  # comma-separated, of rl/planner/kinds.KINDS
-
-    def kind_list(self) -> tuple[str, ...]:
-        kinds = tuple(k.strip() for k in self.kinds.split(",") if k.strip())
-        unknown = [k for k in kinds if k not in KINDS]
-        if unknown or not kinds:
-            raise InputError(f"planner.kinds: {self.kinds!r} must name some of "
-                             f"{', '.join(KINDS)}, comma-separated")
-        return kinds
-
-    def check(self) -> None:
-        check_bounds(self, "planner.")
-        self.kind_list()
-
-
-class PlannerEnv(PrimitiveEnv):
-    """A PrimitiveEnv whose next step may aim exactly at a candidate's point (a topple: never
-    lowered toward push_height), and counts the primitives it simulated."""
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self._exact_aim = None
-        self.simulated = 0
-
-    def step_candidate(self, candidate: Candidate):
-        self._exact_aim = (candidate.point, candidate.normal) if candidate.exact else None
-        try:
-            self.simulated += 1
-            return self.step({"point": candidate.index, "motion": candidate.motion})
-        finally:
-            self._exact_aim = None
-
-    def _aim(self, obs: dict, point: int):
-        if self._exact_aim is not None:
-            return self._exact_aim
-        return super()._aim(obs, point)
-
-
-@dataclass
-class Node:
-    """A state the search reached: the primitive that led there from its parent, the env's
-    snapshot after it, the step's return and its score."""
-    candidate: Candidate | None
-    snapshot: object
-    step: tuple | None
-    score: float
-    done: bool
-    children: list["Node"] | None = None
-
-    def value(self) -> float:
-        """The best score along any sequence from here (a replanning policy stops wherever it
-        is best; one expanded level more can only raise it)."""
-        best = self.score
-        for child in self.children or ():
-            best = max(best, child.value())
-        return best
-
-    def success(self) -> bool:
-        return self.score >= SUCCESS
-
-
-def beam_of(nodes: list[Node], width: int) -> list[Node]:
-    """The `width` nodes kept for the next level: the best of each kind first (by score), then
-    the best of the rest. Why: a push that turns the object scores worse than a turn at once
-    and better after the turn that follows it; a beam of the best scores alone filled with
-    turns and never looked behind the push (measured on a box: 15 turns, no progress)."""
-    ranked = sorted(nodes, key=lambda n: -n.score)
-    firsts, seen = [], set()
-    for n in ranked:
-        if n.candidate.kind not in seen:
-            seen.add(n.candidate.kind)
-            firsts.append(n)
-    rest = [n for n in ranked if all(n is not f for f in firsts)]
-    return (firsts + rest)[:width]
-
-
-def score_of(step: tuple, task) -> tuple[float, bool]:
-    """(score, episode over) of an env step's return (see the module docstring)."""
-    _, _, terminated, truncated, info = step
-    if "sim_error" in info:
-        return FAILED, True
-    status = info["status"]
-    if status["success"] > 0:
-        return SUCCESS, True
-    if status["out_of_workspace"] > 0:
-        return FAILED, True
-    distance = status["position_error"] / task.success_position + \
-        status["orientation_error"] / task.success_orientation
-    return -float(distance), bool(terminated or truncated)
+# The policy source's locations per state at most: the encoder's patches (the spec sheet's 16).
+LOCATIONS = 16
+# A label's reward and value: enough digits for a ranking, few enough for a compact file.
+LABEL_DIGITS = 5
 
 
 class Planner:
-    """Chooses and executes one primitive per `act(env)` call on a PlannerEnv."""
+    """Chooses and executes one primitive per `act(env, obs)` on a PrimitiveEnv with no policy
+    inside; `reset(seed)` before each episode."""
 
-    def __init__(self, config: PlannerConfig, primitive: PrimitiveConfig, task):
+    def __init__(self, config: PlannerConfig, sources: list):
         config.check()
-        self.config, self.primitive, self.task = config, primitive, task
-        self.kinds = config.kind_list()
-        self._root: Node | None = None
+        self.config, self.sources = config, sources
         self.decisions: list[dict] = []
+        self.rng = np.random.default_rng(0)
+        self.simulated = 0
 
-    def reset(self) -> None:
-        self._root, self.decisions = None, []
+    def reset(self, seed: int) -> None:
+        """A new episode: the candidates' random draws restart from `seed`."""
+        self.rng, self.decisions = np.random.default_rng(seed), []
 
-    def _candidates(self, env: PlannerEnv, obs: dict) -> list[Candidate]:
-        cloud, normals = np.asarray(obs["cloud"], float), np.asarray(obs["normals"], float)
-        lengths = np.maximum(np.linalg.norm(normals, axis=1), 1e-9)
-        reachable = reachable_from_above(cloud[:, 2], normals[:, 2] / lengths, self.primitive)
-        return propose(cloud, normals, env.object_pose(), env.episode.goal_pose,
-                       self.primitive.push_distance, reachable, self.kinds,
-                       self.config.per_kind)
+    def _expand(self, env, start, obs) -> list[Branch]:
+        env.restore(start)  # the sources may read the env (the object's pose) as well as obs
+        candidates = propose_all(self.sources, env, obs, self.rng)
+        self.simulated += len(candidates)
+        return simulate(env, start, candidates)
 
-    def _expand(self, env: PlannerEnv, node: Node) -> None:
-        env.restore(node.snapshot)
-        obs = node.step[0] if node.step is not None else env._observation()
-        node.children = []
-        for candidate in self._candidates(env, obs):
-            env.restore(node.snapshot)
-            step = env.step_candidate(candidate)
-            score, done = score_of(step, self.task)
-            node.children.append(Node(candidate, env.snapshot(), step, score, done))
+    def _beam(self, branches: list[Branch]) -> list[int]:
+        """The indices of the `beam` branches with the most reward (stable on ties)."""
+        return sorted(range(len(branches)), key=lambda i: -branches[i].reward)[:self.config.beam]
 
-    def act(self, env: PlannerEnv) -> tuple:
-        """Searches from the env's state, leaves the env after the chosen primitive and returns
-        that step's (obs, reward, terminated, truncated, info); info["planner"] says what was
-        chosen and what it cost."""
-        started, simulated = time.process_time(), env.simulated
-        root = self._root
-        if root is None or root.snapshot is None:
-            root = Node(None, env.snapshot(), None, -np.inf, False)
-        frontier = [root]
-        for _ in range(self.config.depth):
-            level = []
-            for node in frontier:
-                if node.children is None:
-                    self._expand(env, node)
-                level += node.children
-            if not level or any(n.success() for n in level):
-                break
-            frontier = beam_of([n for n in level if not n.done], self.config.beam)
-            if not frontier:
-                break
-        if not root.children:
-            raise InputError("planner: no candidate primitive (no reachable side point)")
-        best = max(root.children, key=lambda n: (n.value(), n.score))
-        env.restore(best.snapshot)
-        self._root = best
-        decision = {"kind": best.candidate.kind, "score": best.score, "value": best.value(),
-                    "simulated": env.simulated - simulated,
-                    "cpu_seconds": time.process_time() - started,
-                    "candidates": len(root.children)}
-        self.decisions.append(decision)
-        obs, reward, terminated, truncated, info = best.step
-        info = dict(info, planner=decision)
-        return obs, reward, terminated, truncated, info
-
-
-def planner_settings(sets: list[str]) -> tuple[PlannerConfig, dict, list[str]]:
-    """(PlannerConfig, primitive.* overrides, the other --set items) of `--set` items."""
-    config, primitive, rest = PlannerConfig(), {}, []
-    fields = {f.name: f.type for f in dataclasses.fields(PlannerConfig)}
-    for item in sets:
-        key, eq, value = item.partition("=")
-        if not eq:
-            raise InputError(f"--set {item}: expected KEY=VALUE")
-        if key.startswith("planner."):
-            name = key[len("planner."):]
-            if name not in fields:
-                raise InputError(f"--set {key}: the planner has no setting {name!r} (it has "
-                                 f"{', '.join(fields)})")
-            try:
-                config = dataclasses.replace(config, **{name: value if name == "kinds"
-                                                        else int(value)})
-            except ValueError:
-                raise InputError(f"--set {key}={value}: expected a whole number") from None
-        elif key.startswith("primitive."):
-            primitive[key[len("primitive."):]] = value
+    def _value(self, env, branch: Branch, levels: int) -> float:
+        """`branch`'s reward plus the discounted best value `levels` levels below it."""
+        if branch.done or levels == 0:
+            return branch.reward
+        children = self._expand(env, branch.snapshot, branch.step[0])
+        if levels == 1:
+            below = max(c.reward for c in children)
         else:
-            rest.append(item)
-    config.check()
-    return config, primitive, rest
+            below = max(self._value(env, children[i], levels - 1) for i in self._beam(children))
+        return branch.reward + self.config.discount * below
+
+    def act(self, env, obs) -> tuple:
+        """Searches from the env's state (`obs` its observation), leaves the env after the chosen
+        primitive and returns that step's (obs, reward, terminated, truncated, info);
+        info["planner"] says what was chosen, what every root candidate earned and was worth,
+        and what the decision cost."""
+        started, self.simulated = time.process_time(), 0
+        first = self._expand(env, env.snapshot(), obs)
+        if self.config.depth == 1:
+            chosen, values = best(first), {}
+        else:
+            values = {i: self._value(env, first[i], self.config.depth - 1)
+                      for i in self._beam(first)}
+            chosen = max(values, key=lambda i: values[i])  # the first of the beam on a tie
+        branch = first[chosen]
+        env.restore(branch.snapshot)
+        decision = {"source": branch.candidate.source, "reward": branch.reward,
+                    "value": values.get(chosen, branch.reward), "chosen": chosen,
+                    "simulated": self.simulated,
+                    "cpu_seconds": time.process_time() - started, "candidates": len(first),
+                    "labels": [label_of(b, values.get(i)) for i, b in enumerate(first)]}
+        self.decisions.append(decision)
+        obs, reward, terminated, truncated, info = branch.step
+        return obs, reward, terminated, truncated, dict(info, planner=decision)
 
 
-# The executor settings the planner runs with unless --set primitive.* says otherwise: the
-# shipped full6d_outcome policy's (models/weights/full6d_outcome/config.yaml), so the two are
-# compared on the same primitives and the same primitive budget.
-SHIPPED_PRIMITIVE = {"approach_steps": 30, "max_primitives": 15}
+def label_of(branch: Branch, value: float | None) -> list:
+    """One root candidate as a label row: [source, point, location, m_x, m_y, m_z, reward,
+    value (None where the search did not value it: outside the beam)]."""
+    c = branch.candidate
+    return [c.source, c.point, c.location, *(round(float(m), 4) for m in c.motion),
+            round(branch.reward, LABEL_DIGITS),
+            None if value is None else round(float(value), LABEL_DIGITS)]
 
 
-def primitive_config(overrides: dict) -> PrimitiveConfig:
-    import yaml
+# The label rows' columns (label_of), written once in a labels file's header.
+LABEL_COLUMNS = ["source", "point", "location", "motion_x", "motion_y", "motion_z", "reward",
+                 "value"]
 
-    values = dict(SHIPPED_PRIMITIVE)
-    for name, text in overrides.items():
-        if name not in {f.name for f in dataclasses.fields(PrimitiveConfig)}:
-            raise InputError(f"--set primitive.{name}: the executor has no such setting")
-        values[name] = yaml.safe_load(text)
-    config = PrimitiveConfig(**values)
-    check_bounds(config, "primitive.")
-    return config
+
+def budget(config: PlannerConfig, candidates: int) -> int:
+    """The most primitives one decision simulates with `candidates` per state."""
+    return candidates * sum(config.beam ** level for level in range(config.depth))
 
 
 @dataclass
 class PlannerPolicy:
-    """What `--run planner` loads: the settings, and a planner per env."""
+    """What `--run planner` loads: the search's and the executor's settings; `planner(task)`
+    makes the Planner (its sources loaded once)."""
     config: PlannerConfig
     primitive: PrimitiveConfig
     kind: str = "planner"
     facts: dict = field(default_factory=dict)
 
+    def planner(self, task) -> Planner:
+        return Planner(self.config, make_sources(self.config, self.primitive, task))
+
+    def candidates_per_state(self) -> int:
+        """The most candidates one state can be offered: at each of the policy's locations its
+        actor's motion and random_motions more, and per_kind of each analytic kind."""
+        return sum(LOCATIONS * (1 + self.config.random_motions) if name == "policy"
+                   else self.config.per_kind for name in self.config.sources)
+
     def describe(self) -> dict:
         return {"privileged": True, "planner": dataclasses.asdict(self.config),
                 "primitive": dataclasses.asdict(self.primitive),
-                "budget_per_decision": budget(self.config)}
-
-
-def budget(config: PlannerConfig) -> int:
-    """The most primitives one decision simulates (the first; later ones reuse a level)."""
-    c = config.per_kind * len(config.kind_list())
-    return c + (config.depth - 1) * config.beam * c
+                "budget_per_decision": budget(self.config, self.candidates_per_state())}

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from corn_drake.errors import InputError
+from corn_drake.rl.envs.branching import Candidate, best, simulate
 
 
 @dataclass
@@ -60,25 +61,21 @@ def candidate_primitives(choice: dict, random_motions: int, rng: np.random.Gener
 
 def lookahead_step(env, candidates: list[tuple[int, int, np.ndarray]]) -> LookaheadStep:
     """Tries every candidate primitive from `env`'s state (a PrimitiveEnv with no policy inside)
-    and leaves the env in the state after the best one (the most reward; the first on a tie,
-    so the greedy choice wins ties)."""
+    through the search's one expansion (rl/envs/branching.simulate) and leaves the env in the
+    state after the best one (the most reward; the first on a tie, so the greedy choice wins
+    ties)."""
     if not candidates:
         raise InputError("lookahead: no candidate primitives (no usable location)")
     start = env.snapshot()
-    rewards, chosen, best_after, best_step = [], None, None, None
-    poses, still, successes = [], [], []
-    for index, (_, point, motion) in enumerate(candidates):
-        env.restore(start)
-        step = env.step({"point": point, "motion": motion})
-        rewards.append(float(step[1]))
-        poses.append(env.object_pose())
-        still.append(env.object_still())
-        successes.append(step[4].get("status", {}).get("success", 0) > 0)
-        if chosen is None or rewards[-1] > rewards[chosen]:
-            chosen, best_after, best_step = index, env.snapshot(), step
-    env.restore(best_after)
+    branches = simulate(env, start, [Candidate("policy", point, np.asarray(motion, float),
+                                               location=location)
+                                     for location, point, motion in candidates])
+    chosen = best(branches)
+    env.restore(branches[chosen].snapshot)
     _, point, motion = candidates[chosen]
-    return LookaheadStep(point=point, motion=motion, rewards=np.asarray(rewards), chosen=chosen,
-                         greedy_reward=rewards[0], step=best_step, start=start,
-                         poses=np.asarray(poses), still=np.asarray(still),
-                         successes=np.asarray(successes))
+    rewards = np.array([b.reward for b in branches])
+    return LookaheadStep(point=point, motion=motion, rewards=rewards, chosen=chosen,
+                         greedy_reward=float(rewards[0]), step=branches[chosen].step,
+                         start=start, poses=np.array([b.pose for b in branches]),
+                         still=np.array([b.still for b in branches]),
+                         successes=np.array([b.success for b in branches]))
