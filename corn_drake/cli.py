@@ -195,7 +195,11 @@ def main(argv: list[str] | None = None) -> int:
 
     handlers = _install(on_signal)
     try:
-        return int(args._run(args) or 0)
+        import_holding_signals(SWALLOWING_IMPORTS)
+        code = int(args._run(args) or 0)
+        if interrupted:  # a library swallowed the Interrupted: the stop is still reported
+            raise Interrupted(interrupted[0])
+        return code
     except InputError as e:
         if debug:
             raise
@@ -230,6 +234,31 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + int(signum)
     finally:
         _restore(handlers)
+
+
+# Libraries whose import catches BaseException around its optional imports (trimesh wraps each
+# in `except BaseException`): an Interrupted raised there was swallowed, and a SIGTERM 2.4 s
+# into `train --policy primitive` let the run train on and exit 0. They are imported before the
+# command runs, with the signals held, so a signal meanwhile is delivered after.
+SWALLOWING_IMPORTS = ("trimesh",)
+
+
+def import_holding_signals(names) -> None:
+    """Imports `names` with SIGINT and SIGTERM blocked in the kernel; one that arrives meanwhile
+    is delivered to the installed handler once they are imported."""
+    import importlib
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        for name in names:
+            importlib.import_module(name)
+        return
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        for name in names:
+            importlib.import_module(name)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _stop_ray() -> None:

@@ -365,6 +365,9 @@ def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, ca
         f.write('{"episode": 7, "obj')
     assert main(["merge-reports", str(a), str(b), "--report", str(tmp_path / "all.json")]) == 0
     merged = json.loads((tmp_path / "all.json").read_text())
+    # Their labels join too: one line per merged episode after the header.
+    labels = (tmp_path / "all.labels.jsonl").read_text().splitlines()
+    assert [json.loads(line)["episode"] for line in labels[1:]] == [0, 1]
     parts = [json.loads((tmp_path / n).read_text())["episodes"][0] for n in ("a.json", "b.json")]
     assert merged["episodes"] == parts and merged["complete"] and merged["privileged"]
     assert [r["object"] for r in parts] == [o for o in json.loads(
@@ -380,3 +383,12 @@ def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, ca
     assert main(["merge-reports", str(a), str(other), "--report", str(tmp_path / "x.json")]) == 2
     assert "settings differ" in capsys.readouterr().err
     assert not (tmp_path / "x.json").exists()
+    # An evaluation into a report whose labels file is another evaluation's is refused before
+    # it plays, and the file is left as it was.
+    foreign = (tmp_path / "a.labels.jsonl").read_text()
+    (tmp_path / "c.labels.jsonl").write_text(foreign)
+    assert main([*common, "--set", "planner.per_kind=2", "--episodes", "1",
+                 "--report", str(tmp_path / "c.json")]) == 2
+    assert "another evaluation's labels" in capsys.readouterr().err
+    assert (tmp_path / "c.labels.jsonl").read_text() == foreign
+    assert not (tmp_path / "c.rows.jsonl").exists()

@@ -3,7 +3,8 @@
 `evaluate --run planner --episodes-from A --episodes B --report PART` plays episodes A..B-1 and
 keeps them in PART's rows file (PART with .rows.jsonl for .json); several such parts, run in
 other processes, sessions or machines, are merged here into the report of all their episodes,
-after checking that they share every setting and play no episode twice.
+after checking that they share every setting and play no episode twice; their labels files
+(REPORT.labels.jsonl) join into the merged report's.
 """
 
 from __future__ import annotations
@@ -26,8 +27,12 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.evaluation.planner_episodes import merge_reports
 
-    if args.report.resolve() in {p.resolve() for p in args.parts} or args.report.with_name(
-            args.report.stem + ".rows.jsonl").resolve() in {p.resolve() for p in args.parts}:
+    from corn_drake.evaluation.planner_episodes import labels_path_of
+
+    outputs = {args.report, args.report.with_name(args.report.stem + ".rows.jsonl"),
+               args.report.with_name(args.report.stem + ".labels.jsonl")}
+    inputs = {q for p in args.parts for q in (p, labels_path_of(p))}
+    if {p.resolve() for p in outputs} & {p.resolve() for p in inputs}:
         raise InputError(f"--report {args.report}: would overwrite one of its parts")
     report = merge_reports(args.parts, args.report)
     interval = report["success_wilson_95"]

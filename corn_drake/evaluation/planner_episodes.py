@@ -109,6 +109,35 @@ def _read_rows(path: Path, settings: dict | None) -> list[dict]:
     return records[1:]
 
 
+def _read_labels(path: Path, settings: dict) -> dict[int, dict]:
+    """The episode labels of `path` (REPORT.labels.jsonl) by episode, the last line of an
+    episode winning (a kill between an episode's labels and its row replays it); {} for no
+    file. A file of another evaluation's labels is refused, as its rows file would be."""
+    if not path.exists():
+        return {}
+    lines = [line for line in path.read_text().splitlines() if line.strip()]
+    try:
+        header = json.loads(lines[0]) if lines else {}
+    except json.JSONDecodeError:
+        header = {}
+    if header.get("settings") != settings:
+        raise InputError(f"{path} holds another evaluation's labels (or none); choose another "
+                         "--report")
+    labels = {}
+    for line in lines[1:]:
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line a kill cut short: its episode is played again
+        labels[record["episode"]] = record
+    return labels
+
+
+def labels_path_of(rows_path: Path) -> Path:
+    """REPORT.labels.jsonl beside REPORT.rows.jsonl."""
+    return rows_path.with_name(rows_path.name.replace(".rows.jsonl", ".labels.jsonl"))
+
+
 def settings_of(path: Path) -> dict:
     lines = path.read_text().splitlines() if path.is_file() else []
     if not lines:
@@ -139,6 +168,10 @@ def merge_reports(parts: list[Path], out: Path) -> dict:
             seen[row["episode"]] = part
             rows.append(row)
     rows.sort(key=lambda r: r["episode"])
+    # The parts' labels join too (parts written before labels existed have none).
+    labels = {}
+    for part in parts:
+        labels.update(_read_labels(labels_path_of(part), settings))
     facts = {k: v for k, v in settings.items() if k not in ("task", "seed", "objects")}
     episodes = range(rows[0]["episode"], rows[-1]["episode"] + 1) if rows else range(0)
     report = report_of(rows, load_primitive_env_config(settings["task"]).task, episodes, facts)
@@ -146,6 +179,13 @@ def merge_reports(parts: list[Path], out: Path) -> dict:
                    "parts": [str(p) for p in parts]})
     write_text(out.with_name(out.stem + ".rows.jsonl"),
                "".join(f"{json.dumps(r)}\n" for r in [{"settings": settings}, *rows]))
+    if labels:
+        from corn_drake.rl.planner.search import LABEL_COLUMNS
+
+        kept = [labels[r["episode"]] for r in rows if r["episode"] in labels]
+        write_text(out.with_name(out.stem + ".labels.jsonl"), "".join(
+            f"{json.dumps(r)}\n" for r in [{"settings": settings, "columns": LABEL_COLUMNS},
+                                           *kept]))
     write_json(out, report)
     return report
 
@@ -216,8 +256,9 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
                 "objects": [o for o, _ in objects]}
     settings = json.loads(json.dumps(settings))  # as it reads back
     rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
-    labels_path = report_path.with_name(report_path.stem + ".labels.jsonl")
+    labels_path = labels_path_of(rows_path)
     rows = [r for r in _read_rows(rows_path, settings) if r["episode"] in episodes]
+    _read_labels(labels_path, settings)  # another evaluation's labels: refused before any episode
     if not rows_path.exists():
         _append(rows_path, {"settings": settings})
     if not labels_path.exists():
