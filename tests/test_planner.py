@@ -338,6 +338,21 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
     for decision, made in zip(episode["decisions"], first["episodes"][0]["decisions"]):
         assert len(decision["labels"]) == made["candidates"]
         assert decision["labels"][decision["chosen"]][0] == made["source"]
+    # Replayed from its seed with the executed primitives, the episode lands on the labelled
+    # states: on this machine every executed primitive earns what it earned in the search.
+    from corn_drake.assets.library import load_object_spec
+    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.rl.planner.labels import read_labels, replay
+
+    settings, columns, records = read_labels(report.with_name("r.labels.jsonl"))
+    env_cfg = load_primitive_env_config(settings["task"])
+    env_cfg.seed = settings["seed"]
+    env = PrimitiveEnv(env_cfg, PlannerRunConfig().primitive.__class__(**settings["primitive"]),
+                       load_object_spec(library, records[0]["object"]))
+    replayed = list(replay(env, records[0], columns))
+    assert len(replayed) == len(records[0]["decisions"])
+    assert all(gap <= 1e-5 for _, _, gap in replayed)  # the labels keep 5 decimals
+    assert replayed[0][0]["cloud"].shape == (512, 3)
     rows = report.with_suffix(".rows.jsonl")
     before = rows.read_text()
     assert main([*argv, "--record", "0"]) == 0

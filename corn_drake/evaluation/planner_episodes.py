@@ -63,8 +63,10 @@ def play(env, planner, seed: int) -> dict:
         if terminated or truncated:
             break
     end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
-    labels = [{"chosen": d["chosen"], "labels": d["labels"]} for d in planner.decisions]
-    decisions = [{k: v for k, v in d.items() if k != "labels"} for d in planner.decisions]
+    labels = [{"chosen": d["chosen"], "executed": d["executed"], "labels": d["labels"]}
+              for d in planner.decisions]
+    decisions = [{k: v for k, v in d.items() if k not in ("labels", "executed")}
+                 for d in planner.decisions]
     distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
     row = {"success": bool(status.get("success", 0) > 0), "steps": int(env.steps),
            "primitives": len(decisions),

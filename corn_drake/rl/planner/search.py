@@ -99,7 +99,8 @@ class Planner:
                     "value": values.get(chosen, branch.reward), "chosen": chosen,
                     "simulated": self.simulated,
                     "cpu_seconds": time.process_time() - started, "candidates": len(first),
-                    "labels": [label_of(b, values.get(i)) for i, b in enumerate(first)]}
+                    "labels": [label_of(b, values.get(i)) for i, b in enumerate(first)],
+                    "executed": executed(branch.candidate)}
         self.decisions.append(decision)
         obs, reward, terminated, truncated, info = branch.step
         return obs, reward, terminated, truncated, dict(info, planner=decision)
@@ -112,6 +113,16 @@ def label_of(branch: Branch, value: float | None) -> list:
     return [c.source, c.point, c.location, *(round(float(m), 4) for m in c.motion),
             round(branch.reward, LABEL_DIGITS),
             None if value is None else round(float(value), LABEL_DIGITS)]
+
+
+def executed(candidate) -> dict:
+    """The executed primitive exactly (JSON keeps a float's every digit), so a labelled
+    episode can be replayed to the states its labels describe: the point, the motion and the
+    exact aim where there was one."""
+    out = {"point": candidate.point, "motion": [float(m) for m in candidate.motion]}
+    if candidate.aim is not None:
+        out["aim"] = [[float(v) for v in part] for part in candidate.aim]
+    return out
 
 
 # The label rows' columns (label_of), written once in a labels file's header.

@@ -1,0 +1,71 @@
+"""The 6D expert's labels as data: what `evaluate --run planner` wrote to REPORT.labels.jsonl,
+read back, and a labelled episode replayed to the very states its labels describe.
+
+A labels file: a header line ({"settings": the evaluation's, as its rows file's; "columns":
+search.LABEL_COLUMNS}), then one line per episode ({"episode", "object", "seed",
+"decisions": [{"chosen", "executed", "labels": [a row per root candidate]}]}). A state is not
+stored (512 cloud points and more per decision): it is rebuilt by replaying the episode from its
+seed with the executed primitives, which lands on the labelled states exactly on the machine
+that wrote them; elsewhere contact physics may round differently and drift a little, so
+`replay` reports how far each replayed primitive's reward is from the recorded one.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from corn_drake.errors import InputError
+
+
+def read_labels(path: str | Path) -> tuple[dict, list[str], list[dict]]:
+    """(settings, columns, episode records in file order, an episode's last line kept)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such labels file")
+    lines = [line for line in path.read_text().splitlines() if line.strip()]
+    try:
+        header = json.loads(lines[0]) if lines else {}
+    except json.JSONDecodeError:
+        header = {}
+    if "settings" not in header or "columns" not in header:
+        raise InputError(f"{path}: not a labels file (its first line names no settings and "
+                         "columns)")
+    episodes: dict[int, dict] = {}
+    for line in lines[1:]:
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line a kill cut short: its episode was played again
+        episodes[record["episode"]] = record
+    return header["settings"], header["columns"], list(episodes.values())
+
+
+def executed_action(decision: dict, columns: list[str]) -> tuple[dict, tuple | None]:
+    """(env action, exact aim or None) of a decision's executed primitive: its `executed`
+    record, or for files written before it, the chosen label row (motion to 4 decimals)."""
+    if "executed" in decision:
+        done = decision["executed"]
+        aim = done.get("aim")
+        return ({"point": int(done["point"]), "motion": np.asarray(done["motion"], float)},
+                None if aim is None else tuple(np.asarray(part, float) for part in aim))
+    row = dict(zip(columns, decision["labels"][decision["chosen"]]))
+    motion = np.array([row["motion_x"], row["motion_y"], row["motion_z"]], float)
+    return {"point": int(row["point"]), "motion": motion}, None
+
+
+def replay(env, record: dict, columns: list[str]) -> Iterator[tuple[dict, dict, float]]:
+    """(observation, decision, |replayed - recorded reward| of the decision's executed
+    primitive) for every decision of `record`, on `env` (a PrimitiveEnv of the labelled
+    object, the evaluation's env settings), in order."""
+    obs, _ = env.reset(seed=record["seed"])
+    reward_column = columns.index("reward")
+    for decision in record["decisions"]:
+        action, aim = executed_action(decision, columns)
+        step = env.step(action, aim=aim)
+        recorded = decision["labels"][decision["chosen"]][reward_column]
+        yield obs, decision, abs(float(step[1]) - recorded)
+        obs = step[0]
