@@ -7,6 +7,11 @@ SHELL := /bin/bash
 # a 6.6 GB venv (measured on 3.12). A pyenv shim exists for every installed version but fails
 # for one not selected, so each is asked to run. docs/install.md: what runs where.
 PYTHON ?= $(shell for p in python3.11 python3.12 python3.13; do $$p -c '' >/dev/null 2>&1 && { echo $$p; break; }; done)
+# TORCH_INDEX=URL: take torch from that index, e.g. PyTorch's own CPU wheel index (docs/install.md),
+# where the machine reaches it: the ~200 MB CPU build instead of PyPI's Linux CUDA build (~2.7 GB).
+# Empty (the default): torch from pip's configured index, PyPI by default.
+TORCH_INDEX ?=
+TORCH_FROM := $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX),)
 VENV := .venv
 STAMP := $(VENV)/.installed
 BIN := $(VENV)/bin
@@ -34,7 +39,7 @@ $(STAMP): pyproject.toml setup.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	# CPU torch first, so that no dependency resolution can reach for a CUDA build.
-	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q $(TORCH_FROM) torch==2.13.0
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $(STAMP)
 
@@ -58,7 +63,7 @@ PYTHON313 ?= env PYENV_VERSION=3.13.0 python3.13
 .venv%/.installed: pyproject.toml setup.py
 	@test -x .venv$*/bin/python || $(PYTHON$*) -m venv .venv$*
 	.venv$*/bin/pip install -q --upgrade pip
-	.venv$*/bin/pip install -q torch==2.13.0
+	.venv$*/bin/pip install -q $(TORCH_FROM) torch==2.13.0
 	.venv$*/bin/pip install -q -e '.[dev]'
 	touch $@
 
