@@ -88,6 +88,36 @@ def fields_refused_as_recorded(recorded, requested) -> set[str]:
     return taken
 
 
+# Which kind of run each schema's command writes (run_folders.config_file.run_kind's names), what
+# to call each kind, and the command that resumes it.
+KIND_OF_SCHEMA = {"TrainConfig": "train", "PrimitiveTrainConfig": "primitive",
+                  "DistillConfig": "distill"}
+KIND_WORDS = {"train": "a dense PPO teacher run", "primitive": "a contact-primitive run",
+              "distill": "a DAgger student run"}
+RESUMED_BY = {"train": "corn-drake train --policy POLICY --out OUT",
+              "primitive": "corn-drake train --policy primitive --out OUT",
+              "distill": "corn-drake distill --out OUT"}
+
+
+def refuse_other_kind(out: Path, schema: type) -> None:
+    """An InputError naming what `out` holds and the command that resumes it, when it holds a
+    run of another kind than `schema`'s command writes (instead of a config error listing
+    unknown fields)."""
+    from corn_drake.run_folders.config_file import run_kind
+
+    wanted = KIND_OF_SCHEMA.get(schema.__name__)
+    if wanted is None:
+        return
+    try:
+        held = run_kind(str(out))
+    except InputError:
+        return  # not a run config of any kind: load_config names what is wrong with it
+    if held != wanted:
+        raise InputError(f"--out {out} holds {KIND_WORDS[held]} (`{RESUMED_BY[held]}` resumes "
+                         f"it), not {KIND_WORDS[wanted]}: give another --out".replace(
+                             "OUT", str(out)))
+
+
 @dataclasses.dataclass
 class ResumableRun:
     out: Path
@@ -110,6 +140,8 @@ class ResumableRun:
             if check_new is not None:
                 check_new()
             refuse_other_folder(out)
+        if path.is_file():
+            refuse_other_kind(out, schema)
         with lock_folder(out):
             yield cls(out, load_config(schema, path) if path.is_file() else None)
 
