@@ -35,3 +35,14 @@ def test_an_out_of_another_kind_is_named_with_its_own_command(tmp_path, capsys, 
     assert f"holds {words}" in err[0] and f"corn-drake {resumer} --out {out}" in err[0]
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml"]
     assert (out / "config.yaml").read_bytes() == before
+
+
+@pytest.mark.parametrize("source, words", [("push_primitive", "a contact-primitive run"),
+                                           ("push_student", "a DAgger student run")])
+def test_init_from_a_run_of_another_kind_names_what_it_is(tmp_path, capsys, source, words):
+    out = tmp_path / "new"
+    code = main(["train", "--policy", "corn", "--init-from", str(SHIPPED / source),
+                 "--steps", "10", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"{words}; a dense teacher starts only" in err[0]
+    assert not out.exists()

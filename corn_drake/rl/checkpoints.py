@@ -137,6 +137,25 @@ def load_student_run_with_step(run_dir: str | Path):
     return cfg, student.eval(), int(state.get("global_step", 0))
 
 
+def _refuse_init_of_another_kind(source: Path) -> None:
+    """A run folder of another kind than a dense teacher's, named in one line with what it is
+    (its config would otherwise be reported field by field as unknown)."""
+    from corn_drake.errors import InputError
+    from corn_drake.run_folders.config_file import run_kind
+
+    try:
+        kind = run_kind(str(source))
+    except (MissingInputError, InputError):
+        return  # no run config of any kind: load_run_config names what is wrong
+    if kind == "primitive":
+        raise InputError(f"--init-from {source}: a contact-primitive run; a dense teacher "
+                         "starts only from a dense teacher run (`train --policy primitive "
+                         "--init-from` takes a primitive run)")
+    if kind == "distill":
+        raise InputError(f"--init-from {source}: a DAgger student run; a dense teacher starts "
+                         "only from a dense teacher run (`corn-drake train`)")
+
+
 def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfig:
     """`cfg` with the encoder (when it names none) and, with take_policy, the policy of its
     init_from run filled in, after checking that the source's agent fits: same policy and critic
@@ -147,6 +166,7 @@ def check_init_source(cfg: TrainConfig, take_policy: bool = False) -> TrainConfi
     from corn_drake.errors import InputError
 
     source = Path(cfg.init_from)
+    _refuse_init_of_another_kind(source)
     try:
         src = load_run_config(source)
     except (MissingInputError, InputError) as e:
