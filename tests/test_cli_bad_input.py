@@ -88,6 +88,11 @@ ROWS = [
     _row("train --policy state --workers 1 --ray-address 127.0.0.1:1 --out {root}/new_run",
          "--ray-address",
          "127.0.0.1:1"),
+    # A cluster address with no Ray worker to send there (issue 63: accepted, ran locally).
+    _row("train --policy state --ray-address 127.0.0.1:1 --out {root}/new_run", "--ray-address",
+         "--workers N"),
+    _row("train --policy primitive --ray-address 127.0.0.1:1 --out {root}/new_run",
+         "--ray-address", "--workers N"),
     _row(f"train --torch-threads 0 {OUT}", "--torch-threads"),
     _row(f"train --torch-threads some {OUT}", "--torch-threads", "'torch', 'auto' or an integer"),
     _row(f"train --policy bogus {OUT}", "--policy"),

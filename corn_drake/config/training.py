@@ -86,6 +86,11 @@ class RunSettings:
               "ray_address": "text", "encoder": "text",
               # Its syntax; rl/device.training_device checks this machine has it.
               "device": "device"}
+    # A cluster runs only Ray workers: an address with no worker to send was accepted and the
+    # run stayed on this machine without a word (issue 63).
+    RELATIONS = (relation("ray_address", "empty when {workers} is 0 (--ray-address needs "
+                          "--workers N: with none the envs run in this process)",
+                          lambda address, workers: not address or workers > 0, "workers"),)
     total_steps: int = 20_000  # environment steps (transitions) over all envs
     workers: int = 0  # 0: envs in this process; > 0: Ray actors
     envs_per_worker: int = 4
