@@ -46,3 +46,4 @@ def test_init_from_a_run_of_another_kind_names_what_it_is(tmp_path, capsys, sour
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and f"{words}; a dense teacher starts only" in err[0]
     assert not out.exists()
+

@@ -62,6 +62,14 @@ class Rollout:
     sim_errors: int
 
 
+def steps_trained(total: int, done: int, per_rollout: int) -> int:
+    """The env steps a run asked for `total` ends at, from `done`: it trains whole rollouts of
+    `per_rollout` steps until it has at least `total`."""
+    if done >= total:
+        return done
+    return done + -(-(total - done) // per_rollout) * per_rollout
+
+
 class Trainer:
     def __init__(self, cfg: TrainConfig, out: str | Path, encoder: torch.nn.Module | None = None):
         self.cfg, self.out = cfg, Path(out)
@@ -185,6 +193,10 @@ class Trainer:
         self.out.mkdir(parents=True, exist_ok=True)
         writer = SummaryWriter(str(self.out / "tb"))
         cfg, n_envs = self.cfg, len(self.rollouts)
+        trained = steps_trained(cfg.total_steps, self.global_step, n_envs * cfg.rollout_steps)
+        if trained != cfg.total_steps:  # said, not rounded without a word (issue 63)
+            print(f"--steps {cfg.total_steps} is trained as {trained}: whole rollouts of "
+                  f"{n_envs} envs x {cfg.rollout_steps} steps", flush=True)
         bar = tqdm(total=cfg.total_steps, initial=self.global_step, disable=not progress,
                    desc=f"train {cfg.policy}", unit="step")
         while self.global_step < cfg.total_steps:
