@@ -96,6 +96,9 @@ def add_arguments(parser):
                              "and its animation controls replay the recorded ones")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--report", required=True, help="JSON report path")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace whatever --report holds (default: only a new path or a "
+                             "report of the same --run is written)")
 
 
 def _whole_library(obj) -> str:
@@ -211,6 +214,11 @@ def _evaluate(args, report_path: Path, out_dir: Path):
         extra |= student_fields
         print(f"student perception: {cfg.segmentation.mode} segmentation + ICP tracking "
               f"(trained with {student_fields['trained_perception']})")
+    # After every argument is checked, before any episode: what --report holds is this run's
+    # to replace, or refused (storage/output_owners.py).
+    from corn_drake.storage.output_owners import check_report_owner
+
+    check_report_owner(report_path, str(args.run), args.overwrite)
     meshcat = _open_meshcat() if args.keep_open else None
 
     def complete_report(report: dict) -> dict:

@@ -1,0 +1,37 @@
+"""Whether an output path may be written by a command: it is new, or it holds an artefact of
+the same kind made by the same source (then it is resumed or replaced, as each command does),
+or the command is refused in one line naming what is there (issue 63: `evaluate --report
+RUN/config.yaml` destroyed a run; a report of one run was replaced by another's). An explicit
+--overwrite replaces it (every write is atomic: temporary file + rename).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from corn_drake.errors import InputError
+
+
+def _describe(path: Path) -> str:
+    if path.is_dir():
+        return "a folder"
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return "a file that is no JSON report"
+    if isinstance(data, dict) and "episodes" in data and "success_rate" in data:
+        return f"the report of --run {data.get('run')}"
+    return "a JSON file that is no evaluate report"
+
+
+def check_report_owner(path: Path, run: str, overwrite: bool, flag: str = "--report") -> None:
+    """Refuses `path` unless it is new, or an evaluate report of `run` (or a partial one that
+    names no run yet), or `overwrite` says to replace whatever is there."""
+    if overwrite or not path.exists():
+        return
+    what = _describe(path)
+    if what in (f"the report of --run {run}", "the report of --run None"):
+        return
+    raise InputError(f"{flag} {path}: holds {what}, which this evaluation of --run {run} would "
+                     "replace; give a new path, or --overwrite to replace it")
