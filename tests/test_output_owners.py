@@ -30,3 +30,25 @@ def test_evaluate_writes_only_its_own_report_unless_told_to_overwrite(tmp_path, 
     assert report.read_text() == before
     assert main([*scripted, "--report", str(report), "--overwrite"]) == 0
     assert json.loads(report.read_text())["run"] == "scripted"
+
+
+def test_ship_writes_only_a_new_folder_or_the_same_runs_weights(tmp_path, capsys):
+    from tests.fixtures import write_loadable_library
+    from tests.paths import REPO_ROOT
+
+    library = write_loadable_library(tmp_path / "lib", 1, 1)
+    manifest = (library / "manifest.json").read_bytes()
+    shipped = REPO_ROOT / "models" / "weights" / "push_primitive"
+    ship = ["ship", "--run", str(shipped), "--report", str(tmp_path / "r.json"),
+            "--library-command", f"corn-drake objects --num-objects 2 --out {library}"]
+    assert main([*ship, "--out", str(library)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds an object library" in err[0] and "--overwrite" in err[0]
+    assert (library / "manifest.json").read_bytes() == manifest
+    assert sorted(p.name for p in library.iterdir() if p.name.endswith(".json")) == \
+        ["manifest.json"]  # no card written into it
+    other = tmp_path / "other_weights"
+    other.mkdir()
+    (other / "card.json").write_text(json.dumps({"source_run": "runs/another"}))
+    assert main([*ship, "--out", str(other)]) == 2
+    assert "holds the weights shipped from runs/another" in capsys.readouterr().err

@@ -316,7 +316,7 @@ def test_a_run_that_chooses_by_an_outcome_model_evaluates_and_ships_with_it(
         assert "fit_history" not in card["outcome_model"]
         assert ("checkpoints/last.pt" in card["bytes"]) == (out == alone), card["bytes"]
         assert shipped_cfg.agent_weights == ("" if out == alone else "../push_primitive")
-        again = tmp_path / "eval_shipped_outcome.json"
+        again = tmp_path / f"eval_shipped_{out == alone}.json"  # each folder's own report
         assert main(["evaluate", "--run", str(out), *args, "--report", str(again)]) == 0
         for mine, theirs in zip(json.loads(again.read_text())["episodes"], report["episodes"]):
             assert (mine["seed"], mine["success"], mine["steps"]) == \

@@ -32,7 +32,8 @@ HOLDER = ("import sys\n"
 # --- evaluate: one writer per report -----------------------------------------------------------
 def test_a_second_evaluate_into_a_report_being_written_is_refused(tmp_path, capsys):
     report = tmp_path / "eval.json"
-    report.write_text('{"old": true}\n')  # the first evaluate's file, still to be replaced
+    old = '{"run": "still", "success_rate": null, "episodes": []}\n'
+    report.write_text(old)  # the first evaluate's file (the same run's), still to be replaced
     holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(report)], env=ENV,
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
@@ -41,7 +42,7 @@ def test_a_second_evaluate_into_a_report_being_written_is_refused(tmp_path, caps
         assert main([*STILL, "--report", str(report)]) == 2
         one_error_line(capsys, "--report", str(report), f"pid {holder.pid}")
         # The refused evaluate wrote nothing and left the holder's lock in place.
-        assert report.read_text() == '{"old": true}\n'
+        assert report.read_text() == old
         assert lock_path(report).read_text().strip() == str(holder.pid)
     finally:
         holder.stdin.close()

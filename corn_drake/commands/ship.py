@@ -60,6 +60,9 @@ def add_arguments(parser):
     parser.add_argument("--train-command", default="",
                         help="the command that trained the run, recorded on the card (default: none)")
     parser.add_argument("--out", required=True, help="weights folder, e.g. models/weights/push_corn")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace whatever --out holds (default: only a new or empty folder, "
+                             "or the weights shipped from the same --run, is written)")
 
 
 def library_arguments(command: str) -> dict[str, str]:
@@ -111,6 +114,9 @@ def run(args) -> int:
 
     # The report first (cheapest, and the commonest mistake), then the library command; the
     # run is loaded and every check made before OUT is (evaluation/shipping.py).
+    from corn_drake.storage.output_owners import check_folder_owner
+
+    check_folder_owner(Path(args.out), str(args.run), args.overwrite)
     report = read_report(args.report, (args.run, args.out), args.allow_partial)
     library = library_arguments(args.library_command)
     card = ship(args.run, args.out, report, args.report,

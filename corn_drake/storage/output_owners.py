@@ -35,3 +35,33 @@ def check_report_owner(path: Path, run: str, overwrite: bool, flag: str = "--rep
         return
     raise InputError(f"{flag} {path}: holds {what}, which this evaluation of --run {run} would "
                      "replace; give a new path, or --overwrite to replace it")
+
+
+def check_folder_owner(out: Path, source: str, overwrite: bool, flag: str = "--out") -> None:
+    """Refuses weights folder `out` unless it is new or empty, or holds the weights shipped from
+    `source` (its card's source_run: shipped again, replaced), or `overwrite` says to replace
+    it. What is there is named: another run's shipped weights, an object library, a run."""
+    if overwrite or not out.exists():
+        return
+    if not out.is_dir():
+        raise InputError(f"{flag} {out}: is a file; give a folder path")
+    entries = list(out.iterdir())
+    if not entries:
+        return
+    card = out / "card.json"
+    if card.is_file():
+        try:
+            shipped_from = json.loads(card.read_text()).get("source_run")
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+            shipped_from = None
+        if shipped_from == source:
+            return
+        what = f"the weights shipped from {shipped_from}"
+    elif (out / "manifest.json").is_file():
+        what = "an object library"
+    elif (out / "config.yaml").is_file():
+        what = "a run folder"
+    else:
+        what = f"{len(entries)} files of something else"
+    raise InputError(f"{flag} {out}: holds {what}; give a new folder, or --overwrite to "
+                     f"replace it with the weights of {source}")
