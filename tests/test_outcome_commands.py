@@ -90,6 +90,11 @@ def test_a_fit_repeats_bit_for_bit_and_the_cli_gives_the_librarys_model(data, tm
     assert _fit_cli(data, tmp_path / "other.pt", "--seed", "4") == 0
     other = _weights(tmp_path / "other.pt")
     assert any(not torch.equal(a[k], other[k]) for k in a)
+    # A fitted model is not replaced by another fit unless --overwrite says so (issue 63).
+    before = first.read_bytes()
+    assert _fit_cli(data, first, "--seed", "4") == 2 and first.read_bytes() == before
+    assert _fit_cli(data, first, "--seed", "4", "--overwrite") == 0
+    assert any(not torch.equal(a[k], _weights(first)[k]) for k in a)
 
 
 def test_objects_fits_the_states_of_that_many_objects(data, tmp_path):

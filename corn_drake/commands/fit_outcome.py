@@ -29,6 +29,8 @@ def add_arguments(parser):
                              "position: libraries of other seeds reuse them)")
     parser.add_argument("--out", type=Path, default=None,
                         help="the model file (default: none; give it and/or --out-run)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the file --out names (default: a new path only)")
     parser.add_argument("--out-run", type=Path, default=None,
                         help="a new run folder that chooses by the model (default: none)")
     parser.add_argument("--task", default=None,
@@ -57,6 +59,9 @@ def run(args) -> int:
 
     from corn_drake.rl.primitive.outcome.fit import fit_outcome
 
+    from corn_drake.storage.output_owners import check_new_file
+
+    check_new_file(args.out, args.overwrite)  # before the fit: a refused fit costs nothing
     # One thread, as every shipped fit ran: another thread count may sum in another order and
     # land on other weights.
     torch.set_num_threads(1)

@@ -65,3 +65,13 @@ def check_folder_owner(out: Path, source: str, overwrite: bool, flag: str = "--o
         what = f"{len(entries)} files of something else"
     raise InputError(f"{flag} {out}: holds {what}; give a new folder, or --overwrite to "
                      f"replace it with the weights of {source}")
+
+
+def check_new_file(path: Path | None, overwrite: bool, flag: str = "--out") -> None:
+    """Refuses an existing `path` (an artefact a rerun cannot tell from another one: a fitted
+    model) unless `overwrite` says to replace it."""
+    if path is None or overwrite or not path.exists():
+        return
+    what = "a folder" if path.is_dir() else f"a file of {path.stat().st_size} bytes"
+    raise InputError(f"{flag} {path}: already holds {what}; give a new path, or --overwrite to "
+                     "replace it")
