@@ -34,7 +34,8 @@ def add_arguments(parser):
     parser.add_argument("--objects", default="",
                         help="object library: its first --split object (default: the task's own "
                              "box)")
-    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"))
+    parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"),
+                        help="which objects of --objects the first is taken from")
     parser.add_argument("--decisions", type=positive_int, default=3,
                         help="expert decisions timed (each ~150 simulated primitives at the "
                              "default settings)")

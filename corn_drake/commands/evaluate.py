@@ -37,8 +37,8 @@ from corn_drake.arguments.value_types import nonnegative_int, positive_int, seed
 from corn_drake.errors import InputError
 
 NAME = "evaluate"
-HELP = ("evaluate a trained teacher or student policy (success rate, per object) with Meshcat "
-        "recordings")
+HELP = ("evaluate a policy (a teacher, a contact-primitive policy, a student, a reference or the "
+        "6D expert): success rate, per object, with Meshcat recordings")
 
 
 def add_arguments(parser):
@@ -46,9 +46,11 @@ def add_arguments(parser):
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
     parser.add_argument("--run", required=True,
-                        help="run folder written by `corn-drake train` (teacher) or `corn-drake "
-                             "distill` (student), or a reference: `scripted` (straight-line "
-                             "pusher) or `still` (zero action)")
+                        help="run folder written by `corn-drake train` (a dense teacher, or "
+                             "with --policy primitive a contact-primitive policy) or `corn-drake "
+                             "distill` (student); a reference: `scripted` (straight-line pusher) "
+                             "or `still` (zero action); or `planner`, the privileged 6D expert "
+                             "(a search over simulated primitives: --set planner.*)")
     parser.add_argument("--objects", default="",
                         help="object library folder (default: the run's object, or its library "
                              "when it was trained with `train --objects`)")
