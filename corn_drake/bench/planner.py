@@ -35,13 +35,14 @@ def add_arguments(parser):
                         help="object library: its first --split object (default: the task's own "
                              "box)")
     parser.add_argument("--split", default="unseen", choices=("train", "unseen", "all"),
-                        help="which objects of --objects the first is taken from")
+                        help="which objects of --objects the first is taken from (default "
+                             "unseen)")
     parser.add_argument("--decisions", type=positive_int, default=3,
                         help="expert decisions timed (each ~150 simulated primitives at the "
                              "default settings)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                         help="planner.*, primitive.* or env settings, as `evaluate --run "
-                             "planner` takes them")
+                             "planner` takes them (default: none, the calibrated expert's)")
     parser.add_argument("--seed", type=nonnegative_int, default=0, help="the episode's seed")
 
 
