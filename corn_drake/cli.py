@@ -197,8 +197,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import_holding_signals(SWALLOWING_IMPORTS)
         code = int(args._run(args) or 0)
-        if interrupted:  # a library swallowed the Interrupted: the stop is still reported
-            raise Interrupted(interrupted[0])
+        stops = [sig for sig in interrupted if sig != signal.SIGINT]
+        if stops:  # a library swallowed the Interrupted: the stop is still reported (a
+            raise Interrupted(stops[0])  # KeyboardInterrupt may be caught on purpose: --keep-open)
         return code
     except InputError as e:
         if debug:
@@ -244,21 +245,15 @@ SWALLOWING_IMPORTS = ("trimesh",)
 
 
 def import_holding_signals(names) -> None:
-    """Imports `names` with SIGINT and SIGTERM blocked in the kernel; one that arrives meanwhile
-    is delivered to the installed handler once they are imported."""
+    """Imports `names` with SIGINT and SIGTERM held (corn_drake/signals.py); one that arrives
+    meanwhile is delivered to the installed handler once they are imported."""
     import importlib
-    import threading
 
-    if threading.current_thread() is not threading.main_thread():
+    from corn_drake.signals import held_signals
+
+    with held_signals():
         for name in names:
             importlib.import_module(name)
-        return
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    try:
-        for name in names:
-            importlib.import_module(name)
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _stop_ray() -> None:

@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "corn_drake"
 
 # Lower number = lower floor. A unit is a subpackage, or a module at the package root.
 LAYERS = {
-    "errors": 0, "transforms": 0,
+    "errors": 0, "transforms": 0, "signals": 0,
     "package_data": 1, "contract": 1, "timing": 1, "storage": 1,
     "__init__": 2,
     "config": 3,
@@ -30,7 +30,8 @@ LAYERS = {
 }
 # The package root: the CLI entry, the shapes every layer shares, errors, the data-file finder,
 # pose math and the policy clock (each imported from several floors, so none belongs to one).
-ROOT_MODULES = {"__init__", "cli", "contract", "errors", "package_data", "timing", "transforms"}
+ROOT_MODULES = {"__init__", "cli", "contract", "errors", "package_data", "signals", "timing",
+                "transforms"}
 
 
 def _unit(module: str) -> str:

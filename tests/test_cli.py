@@ -83,6 +83,7 @@ def test_reference_controllers_evaluate_on_the_push_benchmark(tmp_path):
         if e["success"]:
             assert e["steps"] < 100 and e["position_error"] <= 0.05
     # The zero-action reference leaves the box where it is: no success, full-length episodes.
+    report = tmp_path / "eval_still.json"  # its own report: the scripted one is not its to replace
     assert main(["evaluate", "--run", "still", "--task", PUSH_TASK, "--episodes", "2",
                  "--record", "0", "--report", str(report)]) == 0
     data = json.loads(report.read_text())

@@ -247,6 +247,21 @@ def test_an_ended_branch_is_valued_by_its_reward_alone_and_the_draws_follow_the_
     assert draws[0] == draws[1] and draws[0] != np.random.default_rng(8).uniform()
 
 
+def test_a_state_with_no_candidate_ends_its_branch_and_a_root_with_none_is_named():
+    env = _TreeEnv()
+    # Point 1 leads to a state with nothing to propose: valued by its reward alone (0.9).
+    def source(env, obs, rng):
+        return [] if env.state == (1,) else [Candidate("push", p, np.zeros(3)) for p in (0, 1)]
+    planner = Planner(PlannerConfig(depth=2, beam=2), [source])
+    planner.reset(0)
+    planner.act(env, {})
+    # 0 -> 1.0 + 0.9 x max(-1, -2) = 0.1; 1 -> 0.9 (nothing below it).
+    assert env.state == (1,) and np.isclose(planner.decisions[0]["value"], 0.9)
+    env.restore((1,))
+    with pytest.raises(InputError, match="no candidate primitive at this state"):
+        planner.act(env, {})
+
+
 def test_planner_settings_go_through_the_common_set_path_in_one_line():
     from corn_drake.rl.run_loading import LoadedRun
 

@@ -192,6 +192,7 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
     assert data["overrides"] == [{"key": "env.task.episode_steps", "old": 7, "new": 3}]
     assert max(e["steps"] for e in data["episodes"]) == 3 and data["task"] == "mytask"
     # A reference controller takes the task by --task; without it, the paper's task.
+    report = tmp_path / "eval_still.json"  # its own report: the run's is not its to replace
     assert main(["evaluate", "--run", "still", "--task", str(task), "--episodes", "1",
                  "--record", "0", "--report", str(report)]) == 0
     data = json.loads(report.read_text())

@@ -41,6 +41,13 @@ def _raising_handler(signum, frame):
 
 
 def test_a_signal_during_a_held_import_is_delivered_after_it(swallower):
+    import threading
+
+    # Another thread that does not block the signal (as a test suite's or Ray's leave): the
+    # kernel may hand it the signal, and Python then runs the handler in the main thread.
+    done = threading.Event()
+    other = threading.Thread(target=done.wait, daemon=True)
+    other.start()
     previous = signal.signal(signal.SIGTERM, _raising_handler)
     try:
         with pytest.raises(cli.Interrupted):
@@ -49,6 +56,8 @@ def test_a_signal_during_a_held_import_is_delivered_after_it(swallower):
         assert not hasattr(sys.modules[swallower], "SWALLOWED")
     finally:
         signal.signal(signal.SIGTERM, previous)
+        done.set()
+        other.join()
 
 
 def test_a_command_that_swallowed_the_stop_still_exits_with_the_signal(monkeypatch, capsys):

@@ -112,27 +112,21 @@ def _read_rows(path: Path, settings: dict | None) -> list[dict]:
 
 
 def _read_labels(path: Path, settings: dict) -> dict[int, dict]:
-    """The episode labels of `path` (REPORT.labels.jsonl) by episode, the last line of an
-    episode winning (a kill between an episode's labels and its row replays it); {} for no
-    file. A file of another evaluation's labels is refused, as its rows file would be."""
+    """The episode labels of `path` (REPORT.labels.jsonl, rl/planner/labels.read_labels) by
+    episode; {} for no file. A file of another evaluation's labels is refused, as its rows file
+    would be."""
+    from corn_drake.rl.planner.labels import read_labels
+
     if not path.exists():
         return {}
-    lines = [line for line in path.read_text().splitlines() if line.strip()]
     try:
-        header = json.loads(lines[0]) if lines else {}
-    except json.JSONDecodeError:
-        header = {}
-    if header.get("settings") != settings:
+        found, _, records = read_labels(path)
+    except InputError:
+        found = None
+    if found != settings:
         raise InputError(f"{path} holds another evaluation's labels (or none); choose another "
                          "--report")
-    labels = {}
-    for line in lines[1:]:
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # a line a kill cut short: its episode is played again
-        labels[record["episode"]] = record
-    return labels
+    return {record["episode"]: record for record in records}
 
 
 def labels_path_of(rows_path: Path) -> Path:

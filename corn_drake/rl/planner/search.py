@@ -35,6 +35,7 @@ import numpy as np
 
 from corn_drake.config.planner import PlannerConfig
 from corn_drake.config.primitive import PrimitiveConfig
+from corn_drake.errors import InputError
 from corn_drake.rl.envs.branching import Branch, best, simulate
 from corn_drake.rl.planner.sources import make_sources, propose_all
 
@@ -63,7 +64,7 @@ class Planner:
         env.restore(start)  # the sources may read the env (the object's pose) as well as obs
         candidates = propose_all(self.sources, env, obs, self.rng)
         self.simulated += len(candidates)
-        return simulate(env, start, candidates)
+        return simulate(env, start, candidates) if candidates else []
 
     def _beam(self, branches: list[Branch]) -> list[int]:
         """The indices of the `beam` branches with the most reward (stable on ties)."""
@@ -74,6 +75,8 @@ class Planner:
         if branch.done or levels == 0:
             return branch.reward
         children = self._expand(env, branch.snapshot, branch.step[0])
+        if not children:  # no usable contact there: nothing more to add
+            return branch.reward
         if levels == 1:
             below = max(c.reward for c in children)
         else:
@@ -87,6 +90,9 @@ class Planner:
         and what the decision cost."""
         started, self.simulated = time.process_time(), 0
         first = self._expand(env, env.snapshot(), obs)
+        if not first:
+            raise InputError("planner: no candidate primitive at this state (no usable contact "
+                             "location for any of planner.sources)")
         if self.config.depth == 1:
             chosen, values = best(first), {}
         else:

@@ -10,8 +10,6 @@ run goes on.
 from __future__ import annotations
 
 import contextlib
-import signal
-import threading
 import dataclasses
 
 import numpy as np
@@ -100,35 +98,22 @@ def _ray_processes_in_their_own_session():
 
 @contextlib.contextmanager
 def _signals_held_during_start():
-    """SIGINT / SIGTERM arriving while ray.init runs are held and delivered once it returns.
-
-    ray.init puts its own handlers in while it starts: Python ones (a SIGTERM handler that
-    calls sys.exit from inside its start-up, ending in a native stack dump and exit 134) and,
-    once its core worker connects, native ones, which let a SIGTERM kill the command without a
-    word or dropped it (the run trained on and exited 0: measured with `kill -TERM` 3 s after
-    `train --policy primitive --workers 1` started). So the two signals are blocked in the
-    kernel for the whole start (the threads Ray starts meanwhile inherit the block and never
-    take them), Ray is kept from setting its Python SIGTERM handler, and afterwards the
-    command line's handlers (cli.py: one line, exit 130 / 143) are put back before the block is
-    lifted: a signal that came meanwhile is then delivered to them, ending the command as it
-    would have a moment later."""
-    if threading.current_thread() is not threading.main_thread():
-        yield  # signal handlers belong to the main thread (a notebook's worker thread: as is)
-        return
+    """SIGINT / SIGTERM arriving while ray.init runs are held and delivered once it returns
+    (corn_drake/signals.py). ray.init puts its own handlers in while it starts: a Python
+    SIGTERM handler that calls sys.exit from inside its start-up (a native stack dump and exit
+    134; kept from being set here) and native ones once its core worker connects; held, the
+    signal reaches the command line's handlers (cli.py: one line, exit 130 / 143) instead."""
     import ray._private.utils as ray_utils
 
-    held = {signal.SIGINT, signal.SIGTERM}
-    handlers = {sig: signal.getsignal(sig) for sig in held}
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    from corn_drake.signals import held_signals
+
     set_sigterm_handler = ray_utils.set_sigterm_handler
     ray_utils.set_sigterm_handler = lambda handler: None
     try:
-        yield
+        with held_signals():
+            yield
     finally:
         ray_utils.set_sigterm_handler = set_sigterm_handler
-        for sig, handler in handlers.items():
-            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a held signal is delivered here
 
 
 # The running reaper; holding it keeps our end of its stdin pipe open until this process dies.
