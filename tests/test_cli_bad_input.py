@@ -243,6 +243,18 @@ ROWS += [
          "--seed"),
     _row(f"fit-outcome {PROPOSER} --data {{root}}/lib --out-run {{root}}/out", "{root}/out"),
 ]
+# The expert's labels and the chooser fitted to them (issue 61).
+ROWS += [
+    _row("label --objects {root}/nosuch --out {root}/out/l", "--objects {root}/nosuch"),
+    _row("label --objects {root}/lib --out {root}/out/l.json", "--out {root}/out/l.json"),
+    _row("label --objects {root}/lib --episodes 0 --out {root}/out/l", "--episodes"),
+    _row("fit-chooser --labels {root}/nosuch --objects {root}/lib --out-run {root}/out/f",
+         "--labels {root}/nosuch"),
+    _row("fit-chooser --labels {root}/lib --objects {root}/lib --out-run {root}/out/f",
+         "--labels {root}/lib", "labels.jsonl"),
+    _row("fit-chooser --labels {root}/lib --objects {root}/lib --out-run {root}/out",
+         "--out-run {root}/out"),
+]
 # A planner evaluation's split parts merged (issue 54).
 ROWS += [
     _row("merge-reports {root}/nosuch.rows.jsonl --report {root}/out/m.json", "nosuch.rows.jsonl"),

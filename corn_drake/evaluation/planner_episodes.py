@@ -49,23 +49,29 @@ def cloud_distance(cloud_world: np.ndarray, pose, goal) -> float:
     return float(np.linalg.norm(body @ Rg.T + goal[:3] - cloud_world, axis=1).mean())
 
 
-def play(env, planner, seed: int) -> dict:
+def play(env, planner, seed: int, labeller: "Labeller | None" = None) -> dict:
     """One episode of `planner` on `env` (a PrimitiveEnv with no policy inside) from its start
     (the search's draws seeded by the episode's seed); the report row, its decisions' labels
-    under "labels"."""
+    under "labels". With a `labeller` every state is searched (labelled) as always, but the
+    primitive executed is its learner's where its coin says so (DAgger)."""
     obs, info = env.reset(seed=seed)
     planner.reset(seed)
+    coin = None if labeller is None else labeller.coin(seed)
     start = env.object_pose()
     status, sim_error, started = info["status"], None, time.process_time()
     while True:
-        obs, _, terminated, truncated, info = planner.act(env, obs)
+        if labeller is None:
+            obs, _, terminated, truncated, info = planner.act(env, obs)
+        else:
+            obs, _, terminated, truncated, info = labeller.step(planner, env, obs, coin)
         status, sim_error = info.get("status", status), info.get("sim_error")
         if terminated or truncated:
             break
     end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
-    labels = [{"chosen": d["chosen"], "executed": d["executed"], "labels": d["labels"]}
+    labels = [{"chosen": d["chosen"], "executed": d["executed"], "pose": d["pose"],
+               "labels": d["labels"], **({"actor": d["actor"]} if "actor" in d else {})}
               for d in planner.decisions]
-    decisions = [{k: v for k, v in d.items() if k not in ("labels", "executed")}
+    decisions = [{k: v for k, v in d.items() if k not in ("labels", "executed", "pose")}
                  for d in planner.decisions]
     distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
     row = {"success": bool(status.get("success", 0) > 0), "steps": int(env.steps),
@@ -83,6 +89,44 @@ def play(env, planner, seed: int) -> dict:
            "decisions": decisions, "labels": labels}
     row["failure"] = failure_category(row, env.teacher_cfg.task)
     return row
+
+
+@dataclasses.dataclass
+class Labeller:
+    """DAgger's mixture for `corn-drake label`: at every state the expert searches (its labels
+    are kept as always) and then the expert's choice is executed with probability `beta`, else
+    the `learner`'s (a PrimitiveAgent aimed at the evaluation's executor and task), so the
+    labels describe the states the learner visits. The coin is seeded per episode apart from the
+    search's generator: the search's draws are those of an expert-only episode up to the first
+    state the learner changes."""
+    learner: object
+    beta: float
+    facts: dict  # what the labels' settings say of the mixture: learner, beta
+
+    def coin(self, seed: int) -> np.random.Generator:
+        return np.random.default_rng([seed, COIN_STREAM])
+
+    def step(self, planner, env, obs, coin) -> tuple:
+        start = env.snapshot()
+        decision, branch = planner.search(env, obs)
+        if coin.random() < self.beta:
+            env.restore(branch.snapshot)
+            step, decision["actor"] = branch.step, "expert"
+        else:
+            env.restore(start)
+            choice = self.learner.choose(obs)
+            action = {"point": int(choice["point"]),
+                      "motion": np.asarray(choice["motion"], float)}
+            step = env.step(action)
+            decision.update(actor="learner", reward=float(step[1]),
+                            executed={"point": action["point"],
+                                      "motion": [float(m) for m in action["motion"]]})
+        planner.decisions.append(decision)
+        obs, reward, terminated, truncated, info = step
+        return obs, reward, terminated, truncated, dict(info, planner=decision)
+
+
+COIN_STREAM = 1  # the labeller's coin: a stream of the episode's seed the search never draws
 
 
 def _read_rows(path: Path, settings: dict | None) -> list[dict]:
@@ -234,9 +278,13 @@ def wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
 
 
 def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_path: Path,
-                     progress: bool = False) -> dict:
+                     progress: bool = False, labeller: Labeller | None = None,
+                     facts: dict | None = None) -> dict:
     """Plays evaluate's episodes `episodes` (a range of k) of `policy` (search.PlannerPolicy)
-    round-robin over `objects` [(id, ObjectSpec)] in `cfg`'s env, resuming REPORT.rows.jsonl."""
+    round-robin over `objects` [(id, ObjectSpec)] in `cfg`'s env, resuming REPORT.rows.jsonl.
+    With a `labeller` the states are labelled along its mixture of expert and learner
+    (`corn-drake label`); `facts` are more settings the rows and labels files keep (the
+    library's content hash)."""
     from tqdm import tqdm
 
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
@@ -247,9 +295,10 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     if len(episodes) < 1:
         raise InputError(f"evaluate: no episodes in [{episodes.start}, {episodes.stop})")
     cfg = dataclasses.replace(cfg, seed=seed)  # as policy_env: the env's seed is the base seed
-    facts = policy.describe()
+    facts_more, facts = facts, policy.describe()
     settings = {"task": cfg.task.name, "seed": seed, **facts,
-                "objects": [o for o, _ in objects]}
+                "objects": [o for o, _ in objects],
+                **(labeller.facts if labeller is not None else {}), **(facts_more or {})}
     settings = json.loads(json.dumps(settings))  # as it reads back
     rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
     labels_path = labels_path_of(rows_path)
@@ -271,7 +320,7 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
             envs = {object_id: PrimitiveEnv(cfg, policy.primitive, spec)}  # one env alive
         seed_k = episode_seed(seed, object_id, k // len(objects))
         row = {"episode": k, "object": object_id, "seed": seed_k,
-               **play(envs[object_id], planner, seed_k)}
+               **play(envs[object_id], planner, seed_k, labeller)}
         # The labels first: a kill between the two lines replays the episode, and a reader
         # keeps an episode's last labels line.
         _append(labels_path, {"episode": k, "object": object_id, "seed": seed_k,

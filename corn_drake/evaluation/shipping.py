@@ -242,7 +242,7 @@ def _pack_primitive(loaded, out: Path, library: str) -> dict:
         cfg.env.scene.object.library = library
     weights = {"agent": state["agent"], "global_step": state["global_step"]}
     cfg.agent_weights = ""
-    if cfg.chooser == "outcome_model":
+    if cfg.chooser in ("outcome_model", "expert_value"):
         # Its actor and critic are byte for byte those of the shipped folder that proposes its
         # motions: named there, not copied (models/weights' size budget), as the encoder.
         cfg.agent_weights = _identical_sibling(out, "checkpoints/last.pt",
@@ -270,9 +270,18 @@ def _pack_primitive(loaded, out: Path, library: str) -> dict:
 
         from corn_drake.rl.primitive.outcome.model import MODEL_FILE
 
+        # A learned 6D chooser (rl/imitation/) wraps the outcome model: both files travel.
+        value_chooser = getattr(agent.outcome_chooser, "inner", None) is not None
+        outcome = agent.outcome_chooser.inner if value_chooser else agent.outcome_chooser
         with atomic_path(out / MODEL_FILE) as tmp:
             shutil.copyfile(run_dir / MODEL_FILE, tmp)
-        chooser["outcome_model"] = {"file": MODEL_FILE, **agent.outcome_chooser.facts}
+        chooser["outcome_model"] = {"file": MODEL_FILE, **outcome.facts}
+        if value_chooser:
+            from corn_drake.rl.imitation.value_model import MODEL_FILE as VALUE_FILE
+
+            with atomic_path(out / VALUE_FILE) as tmp:
+                shutil.copyfile(run_dir / VALUE_FILE, tmp)
+            chooser["chooser_value"] = {"file": VALUE_FILE, **agent.outcome_chooser.facts}
     return {**chooser, "policy": cfg.policy, "task": cfg.env.task.name,
             "env_steps": int(state["global_step"]), "env_steps_unit": "primitives",
             "location_count": agent.location_count(),

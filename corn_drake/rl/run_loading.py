@@ -59,8 +59,13 @@ class LoadedRun:
         fields["checkpoint"] = self.checkpoint_file
         if self.kind == "primitive":
             fields["chooser"] = self.config.chooser
-            if self.agent.outcome_chooser is not None:
-                fields["outcome_model"] = self.agent.outcome_chooser.facts
+            chooser = self.agent.outcome_chooser
+            if chooser is not None:
+                # A learned 6D chooser (rl/imitation/) wraps the outcome model: both said.
+                inner = getattr(chooser, "inner", None)
+                fields["outcome_model"] = (inner or chooser).facts
+                if inner is not None:
+                    fields["chooser_value"] = chooser.facts
         return fields
 
     def configure(self, task: str | None, sets: list[str]):

@@ -119,6 +119,22 @@ class DiagramEnv(gym.Env):
         X = self.scene.plant.EvalBodyPoseInWorld(self._plant_context, self.scene.object_body)
         return np.concatenate([X.translation(), X.rotation().ToQuaternion().wxyz()])
 
+    def place_object(self, pose) -> None:
+        """Puts the object at `pose` ([p, q_wxyz], the quaternion normalised), at rest: a
+        labelled state's observation rebuilt from its recorded pose (rl/planner/labels.py)."""
+        from pydrake.common.eigen_geometry import Quaternion
+        from pydrake.math import RigidTransform
+        from pydrake.multibody.math import SpatialVelocity
+
+        pose = np.asarray(pose, float)
+        if pose.shape != (7,) or not np.all(np.isfinite(pose)) or \
+                np.linalg.norm(pose[3:]) < 1e-6:
+            raise InputError(f"place_object: a pose is [x, y, z, qw, qx, qy, qz], got {pose}")
+        plant, body = self.scene.plant, self.scene.object_body
+        plant.SetFreeBodyPose(self._plant_context, body, RigidTransform(
+            Quaternion(pose[3:] / np.linalg.norm(pose[3:])), pose[:3]))
+        plant.SetFreeBodySpatialVelocity(self._plant_context, body, SpatialVelocity.Zero())
+
     def tool_position(self) -> np.ndarray:
         """The tool frame's origin in the world now (where the closed fingers push from)."""
         from corn_drake.scene.franka import tool_frame

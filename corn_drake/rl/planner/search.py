@@ -43,6 +43,9 @@ from corn_drake.rl.planner.sources import make_sources, propose_all
 LOCATIONS = 16
 # A label's reward and value: enough digits for a ranking, few enough for a compact file.
 LABEL_DIGITS = 5
+# The object's pose at a labelled state ([p, q_wxyz]): a micrometre rebuilds its observation
+# (rl/imitation/dataset.py); replaying the executed primitives does not land there exactly.
+POSE_DIGITS = 6
 
 
 class Planner:
@@ -83,12 +86,13 @@ class Planner:
             below = max(self._value(env, children[i], levels - 1) for i in self._beam(children))
         return branch.reward + self.config.discount * below
 
-    def act(self, env, obs) -> tuple:
-        """Searches from the env's state (`obs` its observation), leaves the env after the chosen
-        primitive and returns that step's (obs, reward, terminated, truncated, info);
-        info["planner"] says what was chosen, what every root candidate earned and was worth,
-        and what the decision cost."""
+    def search(self, env, obs) -> tuple[dict, Branch]:
+        """Searches from the env's state (`obs` its observation) and returns (the decision: what
+        was chosen, what every root candidate earned and was worth, what the search cost; the
+        chosen root branch). The env is left in some simulated state: restore a snapshot (the
+        branch's, to execute the choice) before stepping it again."""
         started, self.simulated = time.process_time(), 0
+        pose = [round(float(v), POSE_DIGITS) for v in env.object_pose()]
         first = self._expand(env, env.snapshot(), obs)
         if not first:
             raise InputError("planner: no candidate primitive at this state (no usable contact "
@@ -100,13 +104,19 @@ class Planner:
                       for i in self._beam(first)}
             chosen = max(values, key=lambda i: values[i])  # the first of the beam on a tie
         branch = first[chosen]
-        env.restore(branch.snapshot)
         decision = {"source": branch.candidate.source, "reward": branch.reward,
                     "value": values.get(chosen, branch.reward), "chosen": chosen,
                     "simulated": self.simulated,
                     "cpu_seconds": time.process_time() - started, "candidates": len(first),
                     "labels": [label_of(b, values.get(i)) for i, b in enumerate(first)],
-                    "executed": executed(branch.candidate)}
+                    "executed": executed(branch.candidate), "pose": pose}
+        return decision, branch
+
+    def act(self, env, obs) -> tuple:
+        """search, then the chosen primitive executed: leaves the env after it and returns that
+        step's (obs, reward, terminated, truncated, info); info["planner"] is the decision."""
+        decision, branch = self.search(env, obs)
+        env.restore(branch.snapshot)
         self.decisions.append(decision)
         obs, reward, terminated, truncated, info = branch.step
         return obs, reward, terminated, truncated, dict(info, planner=decision)

@@ -182,7 +182,7 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     if cfg.chooser not in PRIMITIVE_CHOOSERS:
         raise InputError(f"{run_config_path(run_dir)}: chooser must be one of "
                          f"{', '.join(PRIMITIVE_CHOOSERS)}, got {cfg.chooser!r}")
-    if cfg.chooser == "outcome_model":
+    if cfg.chooser in ("outcome_model", "expert_value"):
         from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
         from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts
         from corn_drake.rl.primitive.outcome.model import MODEL_FILE
@@ -190,4 +190,12 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         parts = load_outcome_parts(run_dir / MODEL_FILE)
         agent.outcome_chooser = OutcomeChooser(parts.model, parts.facts["tokens"], parts.facts)
         agent.task = cfg.env.task
+    if cfg.chooser == "expert_value":
+        # The learned 6D chooser (rl/imitation/): its value network picks among the candidates
+        # the outcome model's choices propose.
+        from corn_drake.rl.imitation.chooser import ValueChooser
+        from corn_drake.rl.imitation.value_model import MODEL_FILE as VALUE_FILE, load_value_model
+
+        model, facts = load_value_model(run_dir / VALUE_FILE)
+        agent.outcome_chooser = ValueChooser(model, facts, agent.outcome_chooser)
     return cfg, agent, int(state["global_step"])

@@ -46,34 +46,17 @@ class OutcomeChooser:
     def candidates(self, agent, obs: dict):
         """(Candidates, [(location, cloud point, motion)], which locations are usable (L,), every
         location's cloud point (L,)) for one observation."""
-        from corn_drake.systems.low_push import push_contact
-
         features, points = agent.features(obs)
         with torch.no_grad():
             actor = agent.actor(features)[0].numpy().astype(np.float64)
         usable = features["mask"][0].numpy() > 0.5
-        p = np.asarray(obs["object_position"], np.float64)
-        keypoints = np.asarray(obs["object_keypoints"], np.float64).reshape(-1, 3) - p
-        goal_position, goal_rotation = from_pose9(np.asarray(obs["goal"], np.float64))
-        rows = []
         # No usable location (every pre-contact point under the table): all of them, as the
         # critic's choice then falls back to its argmax over all-masked scores.
-        for location in np.flatnonzero(usable) if usable.any() else range(len(usable)):
-            point = int(points[0, location])
-            aim = push_contact(obs["cloud"], obs["normals"], point, agent.primitive_config)[0] - p
-            normal = np.asarray(obs["normals"][point], np.float64)
-            for motion in np.vstack([actor[location][None], self.bank]):
-                rows.append((int(location), point, motion, aim, normal))
-        n = len(rows)
-        candidates = Candidates(
-            aim=np.stack([r[3] for r in rows]), normal=np.stack([r[4] for r in rows]),
-            motion=np.stack([r[2] for r in rows]),
-            keypoints=np.repeat(keypoints[None], n, 0),
-            physics=np.repeat(np.asarray(obs["physics"], np.float64)[None], n, 0),
-            goal_rotation=np.repeat(goal_rotation[None], n, 0),
-            goal_position=np.repeat(goal_position[None], n, 0),
-            tokens=features["tokens"][0].numpy()[[r[0] for r in rows]])
-        return candidates, [(r[0], r[1], r[2]) for r in rows], usable, points[0].numpy()
+        rows = [(int(location), int(points[0, location]), motion)
+                for location in (np.flatnonzero(usable) if usable.any() else range(len(usable)))
+                for motion in np.vstack([actor[location][None], self.bank])]
+        return (candidates_of(agent, obs, features, rows), rows, usable,
+                points[0].numpy())
 
     def choose(self, agent, obs: dict, task) -> dict:
         """PrimitiveAgent.choose's answer for one observation, chosen by predicted reward under
@@ -93,3 +76,30 @@ class OutcomeChooser:
                          per_location[np.isfinite(per_location)].min())
         return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
                 "scores": shown, "usable": usable, "candidates": points, "motions": motions}
+
+
+def candidates_of(agent, obs: dict, features: dict, rows: list) -> Candidates:
+    """Candidates for `rows` [(location, cloud point, motion)] of one observation: each point's
+    executor aim (low_push.push_contact, relative to the object's origin) and normal, the
+    object's box keypoints, physics and goal, and the location's token (`features`:
+    agent.features(obs)'s)."""
+    from corn_drake.systems.low_push import push_contact
+
+    p = np.asarray(obs["object_position"], np.float64)
+    keypoints = np.asarray(obs["object_keypoints"], np.float64).reshape(-1, 3) - p
+    goal_position, goal_rotation = from_pose9(np.asarray(obs["goal"], np.float64))
+    aims = {}
+    for _, point, _ in rows:
+        if point not in aims:
+            aims[point] = push_contact(obs["cloud"], obs["normals"], point,
+                                       agent.primitive_config)[0] - p
+    n = len(rows)
+    return Candidates(
+        aim=np.stack([aims[r[1]] for r in rows]),
+        normal=np.stack([np.asarray(obs["normals"][r[1]], np.float64) for r in rows]),
+        motion=np.stack([np.asarray(r[2], np.float64) for r in rows]),
+        keypoints=np.repeat(keypoints[None], n, 0),
+        physics=np.repeat(np.asarray(obs["physics"], np.float64)[None], n, 0),
+        goal_rotation=np.repeat(goal_rotation[None], n, 0),
+        goal_position=np.repeat(goal_position[None], n, 0),
+        tokens=features["tokens"][0].numpy()[[r[0] for r in rows]])

@@ -68,7 +68,8 @@ def push_frames(motion: np.ndarray) -> np.ndarray:
     return out
 
 
-def _turn(frames: np.ndarray, v: np.ndarray) -> np.ndarray:
+def turn(frames: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors `v` (R, ..., 3) turned by each row's frame (R, 3, 3)."""
     return np.einsum("rij,r...j->r...i", frames, v)
 
 
@@ -82,8 +83,8 @@ def box_contact_features(c: Candidates) -> torch.Tensor:
     length and its vertical part; how far the motion goes into the surface (minus its dot
     product with the normal); and the episode's physics."""
     frames = push_frames(c.motion)
-    corners, aim = _turn(frames, c.keypoints), _turn(frames, c.aim)
-    normal, motion = _turn(frames, c.normal), _turn(frames, c.motion)
+    corners, aim = turn(frames, c.keypoints), turn(frames, c.aim)
+    normal, motion = turn(frames, c.normal), turn(frames, c.motion)
     low, high = corners.min(1), corners.max(1)
     size, centre = high - low, (high + low) / 2
     length, width, height = size[:, 0], size[:, 1], size[:, 2]
@@ -108,12 +109,12 @@ def model_inputs(c: Candidates, tokens: bool, kind: str = "raw"
     if kind == "box_contact":
         parts = [box_contact_features(c).numpy().astype(np.float64)]
     else:
-        parts = [_turn(frames, c.aim) * SCALE, _turn(frames, c.normal), _turn(frames, c.motion),
-                 _turn(frames, c.keypoints).reshape(len(frames), -1) * SCALE, c.physics]
+        parts = [turn(frames, c.aim) * SCALE, turn(frames, c.normal), turn(frames, c.motion),
+                 turn(frames, c.keypoints).reshape(len(frames), -1) * SCALE, c.physics]
     if tokens:
         parts.append(c.tokens)
     x = torch.as_tensor(np.concatenate(parts, 1), dtype=torch.float32)
-    return x, torch.as_tensor(_turn(frames, c.keypoints) * SCALE, dtype=torch.float32), frames
+    return x, torch.as_tensor(turn(frames, c.keypoints) * SCALE, dtype=torch.float32), frames
 
 
 def rotation_matrices(w: torch.Tensor) -> torch.Tensor:
@@ -157,10 +158,10 @@ def predicted_rewards(c: Candidates, frames: np.ndarray, prediction, task,
     to_world = frames.transpose(0, 2, 1)
     goal_points = np.einsum("rij,rkj->rki", c.goal_rotation, c.keypoints) + \
         (c.goal_position * PLANAR)[:, None]
-    after = _turn(to_world, after / SCALE)
+    after = turn(to_world, after / SCALE)
     closed = np.linalg.norm(c.keypoints - goal_points, axis=2).mean(1) - \
         np.linalg.norm(after - goal_points, axis=2).mean(1)
-    moved = _turn(to_world, displacement / SCALE)
+    moved = turn(to_world, displacement / SCALE)
     planar = np.hypot(*(c.goal_position[:, :2] - moved[:, :2]).T)
     turned = to_world @ rotation_matrices(torch.as_tensor(rotation)).numpy() @ frames
     # The rotation left to the goal: G turned^T; its angle from its trace.
@@ -201,7 +202,7 @@ def data_after(data: dict, frames: np.ndarray) -> torch.Tensor:
     after = np.einsum("rij,rkj->rki", _rotations(data["pose_after"][:, 3:]),
                       data["outcome_corners"][state]) + \
         ((data["pose_after"][:, :3] - p0) * PLANAR)[:, None]
-    return torch.as_tensor(_turn(frames, after) * SCALE, dtype=torch.float32)
+    return torch.as_tensor(turn(frames, after) * SCALE, dtype=torch.float32)
 
 
 def fit_model(data: dict, tokens: bool, updates: int, seed: int,

@@ -30,11 +30,13 @@ def outcome_run_config(run: Path, task: str | None, sets: list[str]):
                                encoder=run_encoder_path(run, base.encoder))
 
 
-def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path) -> None:
+def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Path,
+                      more: dict | None = None) -> None:
     """`out`: a primitive run folder that chooses by `model`: `cfg`, the proposing run's agent
     weights (checkpoints/last.pt) and the model (outcome_model.pt, as
-    rl/primitive/outcome/model_file.save_outcome_model writes it). Built beside `out` and
-    renamed into place, so `out` is whole or absent."""
+    rl/primitive/outcome/model_file.save_outcome_model writes it); `more`: {file name: a
+    function writing it to the path given} (a learned chooser's network). Built beside `out`
+    and renamed into place, so `out` is whole or absent."""
     import shutil
     import tempfile
 
@@ -60,6 +62,8 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
         (building / "checkpoints").mkdir()
         shutil.copyfile(used, building / "checkpoints" / "last.pt")
         save_outcome_model(building / MODEL_FILE, model, tokens, **facts)
+        for name, write in (more or {}).items():
+            write(building / name)
         write_run_config(cfg, building)
         building.rename(out)
     except BaseException:

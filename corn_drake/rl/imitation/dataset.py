@@ -1,0 +1,160 @@
+"""The expert's labels as training arrays: every labelled state rebuilt (rl/planner/labels.py)
+and each of its candidates turned into the chooser's features (features.py).
+
+The labels are the data (models/labels/TASK/*.labels.jsonl, written by `corn-drake label`, or an
+`evaluate --run planner` report's); a state's observation is rebuilt from its episode's seed and
+the object's recorded pose (rl/planner/labels.labelled_states; older files: replayed, which drifts)
+on the objects of the library the labels name (its content hash checked when the file records
+one). The arrays of one labels file are kept in a cache folder under the file's
+sha256, so a second fit reads them at once.
+
+Arrays (one row per candidate): "x" (R, F) the features with the token last, "reward" (R,), "value"
+(R,) NaN outside the beam, "state" (R,) the state's index; per state: "chosen" (S,) the expert's
+choice as a row index, "object" (S,), "drift" (S,) |replayed - recorded reward| of the executed
+primitive where a state was replayed (0 where it was rebuilt from its pose).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from corn_drake.errors import InputError
+
+CACHE_VERSION = 1  # bump when features.py changes what a row holds
+LABELS_SUFFIX = ".labels.jsonl"
+
+
+def label_files(paths: list[Path]) -> list[Path]:
+    """The labels files `paths` name (files, or folders read for *.labels.jsonl), sorted within
+    each folder, or an error naming the path with none."""
+    out = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            found = sorted(path.glob(f"*{LABELS_SUFFIX}"))
+            if not found:
+                raise InputError(f"--labels {path}: no *{LABELS_SUFFIX} files (written by "
+                                 "`corn-drake label`)")
+            out.extend(found)
+        elif path.is_file():
+            out.append(path)
+        else:
+            raise InputError(f"--labels {path}: no such file or folder")
+    return out
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def file_arrays(path: Path, library: Path, cache: Path | None, progress: bool = False) -> dict:
+    """The arrays of labels file `path` (its objects read from `library`), from `cache` when
+    there, else replayed and cached."""
+    key = f"{_sha256(path)[:20]}_v{CACHE_VERSION}.npz"
+    if cache is not None and (cache / key).is_file():
+        with np.load(cache / key) as stored:
+            return dict(stored)
+    arrays = state_arrays(path, library, progress)
+    if cache is not None:
+        from corn_drake.storage.atomic_files import save_npz
+
+        cache.mkdir(parents=True, exist_ok=True)
+        save_npz(cache / key, **arrays)
+    return arrays
+
+
+def _check_library(path: Path, settings: dict, library: Path) -> None:
+    from corn_drake.assets.content_hash import library_content_hash
+    from corn_drake.assets.library import list_objects
+
+    missing = sorted(set(settings["objects"]) - set(list_objects(library)))
+    if missing:
+        raise InputError(f"{path}: labels of objects {', '.join(missing[:3])} that --objects "
+                         f"{library} does not hold")
+    recorded = settings.get("library_content_hash")
+    if recorded and recorded != library_content_hash(library, settings["objects"]):
+        raise InputError(f"{path}: labelled on other objects than --objects {library} holds "
+                         "(the library's content hash differs); replaying them would describe "
+                         "other states")
+
+
+def state_arrays(path: Path, library: Path, progress: bool = False) -> dict:
+    """Every state of labels file `path` rebuilt on `library`'s objects, as arrays."""
+    from tqdm import tqdm
+
+    from corn_drake.assets.library import load_object_spec
+    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.primitive import PrimitiveConfig
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+    from corn_drake.rl.imitation.features import candidate_features
+    from corn_drake.rl.planner.labels import labelled_states, read_labels
+    from corn_drake.rl.planner.sources import load_policy
+    from corn_drake.rl.primitive.outcome.chooser import candidates_of
+
+    settings, columns, records = read_labels(path)
+    _check_library(path, settings, library)
+    if "policy" not in settings["planner"]["sources"]:
+        raise InputError(f"{path}: labels of a search without the policy source (the chooser "
+                         "learns among a primitive run's candidates)")
+    primitive = PrimitiveConfig(**settings["primitive"])
+    cfg = dataclasses.replace(load_primitive_env_config(settings["task"]),
+                              seed=settings["seed"])
+    agent = load_policy(settings["planner"]["policy"], primitive, cfg.task)
+    # A learned chooser's run proposes through the outcome model inside it.
+    outcome = getattr(agent.outcome_chooser, "inner", agent.outcome_chooser)
+    if outcome is None:
+        raise InputError(f"{path}: its proposing run {settings['planner']['policy']} has no "
+                         "outcome model, whose predicted reward the chooser reads")
+    col = {name: i for i, name in enumerate(columns)}
+    xs, rewards, values, states, chosen, objects, drift = [], [], [], [], [], [], []
+    row_count = 0
+    bar = tqdm(records, desc=f"replay {path.name}", unit="episode", disable=not progress)
+    for record in bar:
+        env = PrimitiveEnv(cfg, primitive, load_object_spec(library, record["object"]))
+        for obs, decision, off in labelled_states(env, record, columns):
+            labels = [r for r in decision["labels"] if r[col["source"]] == "policy"]
+            if len(labels) != len(decision["labels"]):
+                raise InputError(f"{path}: episode {record['episode']} has candidates of "
+                                 "other sources than the policy")
+            rows = [(int(r[col["location"]]), int(r[col["point"]]),
+                     np.array([r[col["motion_x"]], r[col["motion_y"]], r[col["motion_z"]]]))
+                    for r in labels]
+            features, _ = agent.features(obs)
+            c = candidates_of(agent, obs, features, rows)
+            predicted = outcome.scores(c, cfg.task, primitive.progress_reward)
+            xs.append(candidate_features(c, predicted, tokens=True).numpy())
+            rewards.append([r[col["reward"]] for r in labels])
+            values.append([np.nan if r[col["value"]] is None else r[col["value"]]
+                           for r in labels])
+            states.append(np.full(len(labels), len(chosen)))
+            chosen.append(row_count + int(decision["chosen"]))
+            objects.append(record["object"])
+            drift.append(off)
+            row_count += len(labels)
+    if not chosen:
+        raise InputError(f"{path}: no labelled states")
+    return {"x": np.concatenate(xs).astype(np.float32),
+            "reward": np.concatenate(rewards).astype(np.float32),
+            "value": np.concatenate(values).astype(np.float32),
+            "state": np.concatenate(states).astype(np.int64),
+            "chosen": np.asarray(chosen, np.int64), "object": np.asarray(objects),
+            "drift": np.asarray(drift, np.float32)}
+
+
+def load_label_arrays(paths: list[Path], library: Path, cache: Path | None,
+                      progress: bool = False) -> dict:
+    """The arrays of every labels file `paths` name, as one (state and row indices offset)."""
+    out: dict[str, list] = {}
+    rows = states = 0
+    for path in label_files(paths):
+        arrays = file_arrays(path, library, cache, progress)
+        arrays["state"] = arrays["state"] + states
+        arrays["chosen"] = arrays["chosen"] + rows
+        rows += len(arrays["reward"])
+        states += len(arrays["chosen"])
+        for k, v in arrays.items():
+            out.setdefault(k, []).append(v)
+    return {k: np.concatenate(v) for k, v in out.items()}

@@ -1,0 +1,85 @@
+"""Fitting the learned chooser (value_model.ValueNet) to label arrays (dataset.py), and how its
+choices compare with the expert's on labelled states no simulator is asked about.
+
+The loss is the Huber loss of the predicted reward on every candidate plus that of the predicted
+value on the candidates the expert's beam valued; Adam, batches of BATCH_ROWS candidates. One
+thread and the same arrays, seed and updates give the same weights.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from corn_drake.rl.imitation.features import BASE_FEATURES
+from corn_drake.rl.imitation.value_model import ValueNet, choose_index
+
+BATCH_ROWS = 256
+HISTORY_EVERY = 200  # updates per row of the fit's learning curve
+
+
+def inputs(data: dict, tokens: bool) -> torch.Tensor:
+    """The feature columns a chooser with or without tokens reads."""
+    x = data["x"] if tokens else data["x"][:, :BASE_FEATURES]
+    return torch.as_tensor(np.asarray(x, np.float32))
+
+
+def fit_value(data: dict, tokens: bool, updates: int, seed: int, hidden: int = 256,
+              history: list | None = None) -> ValueNet:
+    """A ValueNet fitted to every row of `data`; `history` (a list) gets {"update", "loss"}
+    every HISTORY_EVERY updates."""
+    torch.manual_seed(seed)
+    x = inputs(data, tokens)
+    reward = torch.as_tensor(data["reward"], dtype=torch.float32)
+    value = torch.as_tensor(data["value"], dtype=torch.float32)
+    valued = ~torch.isnan(value)
+    model = ValueNet(x.shape[1], hidden)
+    model.standardise_by(x)
+    optimiser = torch.optim.Adam(model.parameters(), lr=3e-4)
+    done, window = 0, []
+    while done < updates:
+        for batch in torch.randperm(len(x)).split(BATCH_ROWS):
+            out = model(x[batch])
+            loss = nn.functional.huber_loss(out[:, 0], reward[batch], delta=0.5)
+            mask = valued[batch]
+            if mask.any():
+                loss = loss + nn.functional.huber_loss(out[mask, 1], value[batch][mask],
+                                                       delta=0.5)
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            done += 1
+            window.append(loss.item())
+            if history is not None and (done % HISTORY_EVERY == 0 or done == updates):
+                history.append({"update": done, "loss": float(np.mean(window))})
+                window = []
+            if done == updates:
+                break
+    return model.eval()
+
+
+def picks(model: ValueNet, data: dict, tokens: bool, beam: int) -> np.ndarray:
+    """(S,) the row the chooser picks at every state of `data`, among that state's labelled
+    candidates."""
+    with torch.no_grad():
+        out = model(inputs(data, tokens)).numpy()
+    rows = np.arange(len(data["state"]))
+    return np.array([rows[data["state"] == s][choose_index(out[data["state"] == s, 0],
+                                                           out[data["state"] == s, 1], beam)]
+                     for s in range(len(data["chosen"]))])
+
+
+def agreement(model: ValueNet, data: dict, tokens: bool, beam: int) -> dict:
+    """How the chooser's picks compare with the expert's at `data`'s states: the share where it
+    picks the expert's candidate; the mean reward of its pick against the expert's and against
+    the best one-step reward there; the share of picks the expert valued (in its beam)."""
+    chosen = picks(model, data, tokens, beam)
+    reward, value, state = data["reward"], data["value"], data["state"]
+    best = np.array([reward[state == s].max() for s in range(len(chosen))])
+    return {"states": int(len(chosen)),
+            "agreement": float(np.mean(chosen == data["chosen"])),
+            "pick_reward": float(np.mean(reward[chosen])),
+            "expert_reward": float(np.mean(reward[data["chosen"]])),
+            "best_reward": float(np.mean(best)),
+            "pick_in_beam": float(np.mean(~np.isnan(value[chosen])))}
