@@ -3,8 +3,11 @@
 `evaluate --run planner --episodes-from A --episodes B --report PART` plays episodes A..B-1 and
 keeps them in PART's rows file (PART with .rows.jsonl for .json); several such parts, run in
 other processes, sessions or machines, are merged here into the report of all their episodes,
-after checking that they share every setting and play no episode twice; their labels files
-(REPORT.labels.jsonl) join into the merged report's.
+after checking that they share every setting, that every row is the episode its number says
+(its object and seed) within its part's requested range, and that no episode comes twice
+(evaluation/report_merge.py); the episodes asked for and missing are said. Their labels files
+(REPORT.labels.jsonl) join into the merged report's: `corn-drake label`'s parts merge the same
+way.
 """
 
 from __future__ import annotations
@@ -25,16 +28,18 @@ def add_arguments(parser):
 
 def run(args) -> int:
     from corn_drake.errors import InputError
-    from corn_drake.evaluation.planner_episodes import merge_reports
-
     from corn_drake.evaluation.planner_episodes import labels_path_of
+    from corn_drake.evaluation.report_merge import merge_reports
 
     outputs = {args.report, args.report.with_name(args.report.stem + ".rows.jsonl"),
                args.report.with_name(args.report.stem + ".labels.jsonl")}
     inputs = {q for p in args.parts for q in (p, labels_path_of(p))}
     if {p.resolve() for p in outputs} & {p.resolve() for p in inputs}:
         raise InputError(f"--report {args.report}: would overwrite one of its parts")
-    report = merge_reports(args.parts, args.report)
+    notes: list[str] = []
+    report = merge_reports(args.parts, args.report, notes)
+    for note in notes:
+        print(f"note: {note}")
     interval = report["success_wilson_95"]
     print(f"{len(report['episodes'])} episodes from {len(args.parts)} parts: success "
           f"{report['success_rate']:.3f}" + (f" (95 % {interval[0]:.3f}-{interval[1]:.3f})"

@@ -129,10 +129,11 @@ class Labeller:
 COIN_STREAM = 1  # the labeller's coin: a stream of the episode's seed the search never draws
 
 
-def _read_rows(path: Path, settings: dict | None) -> list[dict]:
+def read_rows(path: Path, settings: dict | None, repair: bool = True,
+              notes: list | None = None) -> list[dict]:
     """The episode rows of `path` written with `settings` (None: whichever it names; read
-    `settings_of` for them). A last line that a kill cut short is dropped from the file: every
-    line before it is a whole episode."""
+    `settings_of` for them). A last line that a kill cut short is dropped (its episode was not
+    finished): from the file too with `repair` (a resume), else only said in `notes`."""
     if not path.exists():
         return []
     lines = path.read_text().splitlines()
@@ -146,7 +147,11 @@ def _read_rows(path: Path, settings: dict | None) -> list[dict]:
             if i != len(lines) - 1:
                 raise InputError(f"{path}: line {i + 1} is not a JSON row; the file is damaged"
                                  ) from None
-            write_text(path, "".join(f"{json.dumps(r)}\n" for r in records))
+            if repair:
+                write_text(path, "".join(f"{json.dumps(r)}\n" for r in records))
+            elif notes is not None:
+                notes.append(f"{path}: its last line is cut short (a kill mid-write); that "
+                             "episode is not counted")
     if not records or "settings" not in records[0]:
         raise InputError(f"{path}: not a planner rows file (its first line names no settings)")
     if settings is not None and records[0]["settings"] != settings:
@@ -155,7 +160,30 @@ def _read_rows(path: Path, settings: dict | None) -> list[dict]:
     return records[1:]
 
 
-def _read_labels(path: Path, settings: dict) -> dict[int, dict]:
+def claim_range(rows_path: Path, settings: dict, episodes: range, rows: list[dict]) -> None:
+    """Writes the rows file's header, {"settings", "requested": [first, stop)}: the episodes
+    this evaluation was asked for, which merge-reports checks a part against. A resume asks for
+    the same range or one holding it (the header then says the larger); another range is
+    refused, naming both. A file from before the header said its range gets one when all its
+    rows lie in the range asked for."""
+    header = {"settings": settings, "requested": [episodes.start, episodes.stop]}
+    if not rows_path.exists():
+        _append(rows_path, header)
+        return
+    lines = rows_path.read_text().splitlines()
+    before = json.loads(lines[0]).get("requested")
+    had = range(*before) if before else range(min((r["episode"] for r in rows), default=0),
+                                              max((r["episode"] for r in rows), default=-1) + 1)
+    if had.start < episodes.start or had.stop > episodes.stop:
+        if before or rows:
+            raise InputError(f"{rows_path} holds the evaluation of episodes {had.start}.."
+                             f"{had.stop - 1}; ask for a range holding it (--episodes-from "
+                             f"{had.start} --episodes {had.stop}) or give another --report")
+    if before != header["requested"]:
+        write_text(rows_path, "\n".join([json.dumps(header), *lines[1:]]) + "\n")
+
+
+def read_labels_by_episode(path: Path, settings: dict) -> dict[int, dict]:
     """The episode labels of `path` (REPORT.labels.jsonl, rl/planner/labels.read_labels) by
     episode; {} for no file. A file of another evaluation's labels is refused, as its rows file
     would be."""
@@ -189,47 +217,6 @@ def settings_of(path: Path) -> dict:
                          ) from None
 
 
-def merge_reports(parts: list[Path], out: Path) -> dict:
-    """One report of the episodes that split runs (`--episodes-from`) played: `parts` are their
-    REPORT.rows.jsonl files, which must share every setting and may not play an episode twice.
-    Written to `out` (and its own rows file) atomically; returns the report."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
-
-    settings = settings_of(parts[0])
-    rows, seen = [], {}
-    for part in parts:
-        if settings_of(part) != settings:
-            raise InputError(f"{part}: its settings differ from {parts[0]}'s; only parts of one "
-                             "evaluation merge")
-        for row in _read_rows(part, settings):
-            if row["episode"] in seen:
-                raise InputError(f"episode {row['episode']} is in both {seen[row['episode']]} "
-                                 f"and {part}")
-            seen[row["episode"]] = part
-            rows.append(row)
-    rows.sort(key=lambda r: r["episode"])
-    # The parts' labels join too (parts written before labels existed have none).
-    labels = {}
-    for part in parts:
-        labels.update(_read_labels(labels_path_of(part), settings))
-    facts = {k: v for k, v in settings.items() if k not in ("task", "seed", "objects")}
-    episodes = range(rows[0]["episode"], rows[-1]["episode"] + 1) if rows else range(0)
-    report = report_of(rows, load_primitive_env_config(settings["task"]).task, episodes, facts)
-    report.update({"run": "planner", "policy": "planner", "seed": settings["seed"],
-                   "parts": [str(p) for p in parts]})
-    write_text(out.with_name(out.stem + ".rows.jsonl"),
-               "".join(f"{json.dumps(r)}\n" for r in [{"settings": settings}, *rows]))
-    if labels:
-        from corn_drake.rl.planner.search import LABEL_COLUMNS
-
-        kept = [labels[r["episode"]] for r in rows if r["episode"] in labels]
-        write_text(out.with_name(out.stem + ".labels.jsonl"), "".join(
-            f"{json.dumps(r)}\n" for r in [{"settings": settings, "columns": LABEL_COLUMNS},
-                                           *kept]))
-    write_json(out, report)
-    return report
-
-
 def _append(path: Path, record: dict) -> None:
     with open(path, "a") as f:
         f.write(json.dumps(record) + "\n")
@@ -237,7 +224,8 @@ def _append(path: Path, record: dict) -> None:
         os.fsync(f.fileno())
 
 
-def report_of(rows: list[dict], task, requested: range, facts: dict) -> dict:
+def report_of(rows: list[dict], task, requested, facts: dict) -> dict:
+    """The report of `rows` (episodes of `requested`, a range or sorted list of k)."""
     per_object = defaultdict(list)
     for r in rows:
         per_object[r["object"]].append(r["success"])
@@ -263,7 +251,7 @@ def report_of(rows: list[dict], task, requested: range, facts: dict) -> dict:
             "decisions_per_core_hour": 3600.0 * len(decisions) / sum(
                 r["cpu_seconds"] for r in rows) if decisions else None,
             "kinds_chosen": dict(sum((Counter(r["kinds_chosen"]) for r in rows), Counter())),
-            "episodes_from": requested.start, "episodes_requested": len(requested),
+            "episodes_from": min(requested, default=0), "episodes_requested": len(requested),
             "complete": n == len(requested), "episodes": rows}
 
 
@@ -302,10 +290,10 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     settings = json.loads(json.dumps(settings))  # as it reads back
     rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
     labels_path = labels_path_of(rows_path)
-    rows = [r for r in _read_rows(rows_path, settings) if r["episode"] in episodes]
-    _read_labels(labels_path, settings)  # another evaluation's labels: refused before any episode
-    if not rows_path.exists():
-        _append(rows_path, {"settings": settings})
+    rows = read_rows(rows_path, settings)
+    # Another evaluation's labels: refused before any episode.
+    read_labels_by_episode(labels_path, settings)
+    claim_range(rows_path, settings, episodes, rows)
     if not labels_path.exists():
         _append(labels_path, {"settings": settings, "columns": LABEL_COLUMNS})
     done = {r["episode"] for r in rows}

@@ -38,6 +38,7 @@ def read_report(path: str, runs: tuple[str, str], allow_partial: bool = False) -
         raise InputError(f"--out {out} is the run folder itself")
     report = read_json(path, "--report")
     check_report(report, runs, path)
+    check_report_numbers(report, path)
     if report.get("complete", True) is False and not allow_partial:
         raise InputError(f"--report {path} is partial (complete: false, {len(report['episodes'])}"
                          f" of {report.get('episodes_requested', '?')} episodes); a card quotes "
@@ -64,6 +65,82 @@ def check_report(report: dict, runs: tuple[str, ...], path: str) -> None:
     if report.get("checkpoint", "last.pt") != "last.pt":
         raise InputError(f"--report {path} evaluated the kept checkpoint {report['checkpoint']}; "
                          "a card quotes the weights it ships, the run's last.pt")
+
+
+def check_report_numbers(report: dict, path: str) -> None:
+    """The numbers a card quotes are those of the report's own episodes: its success rates
+    recomputed from its rows, `complete` from how many of the episodes asked for it holds, each
+    episode once. An InputError naming --report `path` and the number otherwise (an edited
+    report)."""
+    import numpy as np
+
+    episodes = report["episodes"]
+    if not episodes:
+        raise InputError(f"--report {path}: no episodes to quote")
+    rate = float(np.mean([bool(e.get("success")) for e in episodes]))
+    if abs(float(report["success_rate"]) - rate) > 1e-9:
+        raise InputError(f"--report {path}: its success_rate {report['success_rate']} is not its "
+                         f"{len(episodes)} episodes' ({rate:.4f}); the report was edited")
+    by_object: dict = {}
+    for e in episodes:
+        by_object.setdefault(e.get("object"), []).append(bool(e.get("success")))
+    balanced = float(np.mean([np.mean(v) for v in by_object.values()]))
+    if report.get("balanced_success_rate") is not None and \
+            abs(float(report["balanced_success_rate"]) - balanced) > 1e-9:
+        raise InputError(f"--report {path}: its balanced_success_rate "
+                         f"{report['balanced_success_rate']} is not its episodes' "
+                         f"({balanced:.4f}); the report was edited")
+    numbers = [e["episode"] for e in episodes if "episode" in e]
+    if len(set(numbers)) != len(numbers):
+        raise InputError(f"--report {path}: an episode is listed twice; the report was edited")
+    requested = report.get("episodes_requested")
+    if requested is not None and report.get("complete", True) != (len(episodes) >= requested):
+        raise InputError(f"--report {path} says complete: {report.get('complete', True)} with "
+                         f"{len(episodes)} of the {requested} episodes asked for; the report "
+                         "was edited")
+
+
+def check_weights_hash(report: dict, path: str, loaded, stream=None) -> None:
+    """The report measured these very weights: the weights_sha256 it recorded is that of the
+    run it names (rl/run_loading.LoadedRun.weights_hash: config, checkpoint, chooser files), or
+    an InputError (retrained, even to the same step count, or edited since). A report from
+    before the hash was recorded gets a warning."""
+    recorded = report.get("weights_sha256")
+    if recorded is None:
+        print(f"warning: --report {path} records no weights_sha256 (written before evaluate "
+              "recorded it): cannot check that it measured these very weights",
+              file=stream or sys.stderr)
+        return
+    if Path(report["run"]).resolve() != Path(loaded.run).resolve():
+        from corn_drake.rl.run_loading import load_any_run
+
+        loaded = load_any_run(report["run"], references=False)  # the shipped folder it measured
+    if loaded.weights_hash() != recorded:
+        raise InputError(f"--report {path} measured other weights than {report['run']} holds "
+                         "now (its config, checkpoint or chooser changed since: weights_sha256 "
+                         "differs); a card quotes the weights it ships: evaluate them again")
+
+
+def check_report_library(report: dict, path: str, library: str, stream=None) -> None:
+    """The report's episodes were played on objects of `library` (what --library-command
+    builds): every episode's object is one of its objects, or an InputError naming them; a
+    report of another build of it (its manifest's sha256 differs) gets a warning."""
+    import hashlib
+
+    from corn_drake.assets.library import list_objects
+
+    held = set(list_objects(library))
+    missing = sorted({e.get("object") for e in report["episodes"]} - held)
+    if missing:
+        raise InputError(f"--report {path} evaluated objects {', '.join(map(str, missing[:3]))} "
+                         f"that --library-command's library {library} does not hold; a card "
+                         "names the library its report measured")
+    recorded = (report.get("library") or {}).get("manifest_sha256")
+    manifest = Path(library) / "manifest.json"
+    if recorded and recorded != hashlib.sha256(manifest.read_bytes()).hexdigest():
+        print(f"warning: --report {path} was measured on another build of {library} (its "
+              "manifest differs); the card records this build's object hashes",
+              file=stream or sys.stderr)
 
 
 def check_measured_weights(report: dict, path: str, run: str, env_steps: int,
@@ -100,8 +177,10 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
         raise InputError(f"--report {report_path} records no perception chain; a student's card "
                          "quotes an evaluation through it")
     check_measured_weights(report, report_path, run, loaded.env_steps, loaded.checkpoint_file)
+    check_weights_hash(report, report_path, loaded)
     # Before OUT is made: the library must be on this machine to record what it holds.
     library_fields = library_card_fields(library)
+    check_report_library(report, report_path, library)
     pack = {"distill": _pack_student, "primitive": _pack_primitive}.get(loaded.kind, _pack_teacher)
     shipped = pack(loaded, out, library)
     episodes = len(report["episodes"])
@@ -109,6 +188,9 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
             "success_rate": report["success_rate"],
             "balanced_success_rate": report.get("balanced_success_rate"),
             "episodes": episodes,
+            # Beside the paper's rule (a pose passed through counts): the successes whose
+            # episode ended with the object still on its goal, from the report's rows.
+            **_at_rest_fields(report),
             # Only a partial report (shipped with --allow-partial) says so: a whole one's card
             # keeps the keys cards have always had.
             **({"complete": False} if report.get("complete", True) is False else {}),
@@ -125,6 +207,19 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
                      for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
     write_json(out / "card.json", card)
     return card
+
+
+def _at_rest_fields(report: dict) -> dict:
+    """{"successes_ending_at_rest", "success_rate_ending_at_rest"} of the report's rows, both
+    None for rows that record no end speed (reports from before they did)."""
+    from corn_drake.evaluation.failures import successes_ending_still
+
+    episodes = report["episodes"]
+    if not any(e.get("end_speed") is not None for e in episodes):
+        return {"successes_ending_at_rest": None, "success_rate_ending_at_rest": None}
+    still = successes_ending_still(episodes)
+    return {"successes_ending_at_rest": still,
+            "success_rate_ending_at_rest": still / len(episodes)}
 
 
 def _weights(loaded, key: str) -> dict:

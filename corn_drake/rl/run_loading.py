@@ -21,6 +21,9 @@ from typing import Any
 REFERENCES = {"scripted": "ScriptedPushAgent", "still": "HoldStillAgent"}
 # The privileged planning policy (rl/planner/): no run folder, its budget is `--set planner.*`.
 PLANNER = "planner"
+# The files beside a primitive run's checkpoint that choose for it (an outcome model, a learned
+# 6D chooser): part of its weights_hash.
+CHOOSER_FILES = ("outcome_model.pt", "chooser_value.pt")
 
 
 @dataclass
@@ -46,6 +49,25 @@ class LoadedRun:
         """The very file the weights were loaded from."""
         return self.weights_folder / "checkpoints" / self.checkpoint_file
 
+    def weights_hash(self) -> str | None:
+        """sha256 over what decides this run's choices: its config.yaml, the checkpoint file its
+        weights were loaded from and the chooser's model files beside them (None for a
+        reference or the planner). A report records it; `ship` packs only the weights whose
+        hash the report it quotes recorded."""
+        import hashlib
+
+        from corn_drake.run_folders.config_file import run_config_path
+
+        if self.kind in ("reference", "planner"):
+            return None
+        digest = hashlib.sha256()
+        folder = Path(self.run)
+        files = [run_config_path(folder), self.checkpoint_path,
+                 *(folder / name for name in CHOOSER_FILES if (folder / name).is_file())]
+        for path in files:
+            digest.update(path.name.encode() + b"\0" + Path(path).read_bytes())
+        return digest.hexdigest()
+
     def report_fields(self) -> dict:
         """What a report of this run records of the weights it measured ({} for a reference):
         `ship` compares env_steps and checkpoint with the weights it packs."""
@@ -57,6 +79,7 @@ class LoadedRun:
         if self.kind == "primitive":  # one decision each, many policy periods
             fields["env_steps_unit"] = "primitives"
         fields["checkpoint"] = self.checkpoint_file
+        fields["weights_sha256"] = self.weights_hash()
         if self.kind == "primitive":
             fields["chooser"] = self.config.chooser
             chooser = self.agent.outcome_chooser
