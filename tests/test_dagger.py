@@ -199,6 +199,19 @@ def test_a_killed_distill_run_resumes_at_its_checkpoint_step(teacher_run, tmp_pa
     # The recorded config is the run's: a resume with another window is refused, naming it.
     assert _distill(teacher, encoder, out, 48, "--window", "8") == 2
     assert "--window" in capsys.readouterr().err
+    # The teacher trained further (its weights changed): resuming would distil two teachers.
+    weights = teacher / "checkpoints" / "last.pt"
+    kept = weights.read_bytes()
+    state = load_checkpoint(weights)
+    state["global_step"] += 16
+    try:
+        torch.save(state, weights)
+        assert _distill(teacher, encoder, out, 48) == 2
+        err = capsys.readouterr().err
+        assert "teacher_weights" in err and "mix" in err
+    finally:
+        weights.write_bytes(kept)
+    assert json.loads((out / "metrics.json").read_text())["global_step"] == 40  # untouched
 
 
 @pytest.mark.slow
@@ -220,3 +233,26 @@ def test_distill_refuses_a_student_run_as_teacher_and_a_teacher_without_encoder(
                 str(tmp_path / "s2"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "--run" in err and "not a trained teacher run" in err
+
+
+@pytest.mark.slow
+def test_a_run_whose_config_was_edited_after_training_is_refused(teacher_run, tmp_path, capsys):
+    """The checkpoint knows the env it was trained on: a config.yaml edited afterwards cannot
+    make evaluate (or distill, or ship) say it measured what the weights were not trained on."""
+    import shutil
+
+    teacher, _ = teacher_run
+    run = tmp_path / "teacher"
+    shutil.copytree(teacher, run)
+    config = run / "config.yaml"
+    text = config.read_text()
+    assert "episode_steps: 10\n" in text
+    config.write_text(text.replace("episode_steps: 10\n", "episode_steps: 40\n"))
+    report = tmp_path / "r.json"
+    assert cli(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
+                "--no-progress", "--report", str(report)]) == 2
+    err = capsys.readouterr().err
+    assert "config.yaml" in err and "edited after training" in err and not report.exists()
+    config.write_text(text)  # restored: it loads again
+    assert cli(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
+                "--no-progress", "--report", str(report)]) == 0

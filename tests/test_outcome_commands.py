@@ -180,7 +180,7 @@ def test_collect_outcomes_writes_a_chunk_and_a_rerun_skips_it(tmp_path, capsys):
             "primitive.max_primitives=1", "--out", str(out)]
     assert main(args) == 0
     chunk = out / "episodes_00000.npz"
-    assert sorted(p.name for p in out.iterdir()) == [chunk.name]
+    assert sorted(p.name for p in out.iterdir()) == [chunk.name, "inputs.json"]
     assert '"episode": 0' in capsys.readouterr().out
     data = load_outcome_data([out])
     assert len(data["features_tokens"]) == 1 and set(data["object"]) == {"0:box_00"}
@@ -188,6 +188,13 @@ def test_collect_outcomes_writes_a_chunk_and_a_rerun_skips_it(tmp_path, capsys):
     stamp = chunk.stat().st_mtime_ns
     assert main(args) == 0
     assert chunk.stat().st_mtime_ns == stamp and "wrote 0 file(s)" in capsys.readouterr().out
+    # More episodes of other settings into the same folder would mix data: refused, named.
+    other = [*args[:-2], "--start", "1", "--at-rest", "--out", str(out)]
+    other[other.index("--random-motions") + 1] = "2"
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert "random_motions: 0 then, 2 now" in err and "mix" in err
+    assert sorted(p.name for p in out.iterdir()) == [chunk.name, "inputs.json"]
 
 
 def test_collect_outcomes_refuses_a_library_without_training_objects(tmp_path, capsys):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 import time
 import zlib
@@ -394,6 +395,16 @@ def ingested_ids(source: Path, files: list[Path], manifest: Manifest, out: Path)
     return ids
 
 
+def _forget(out: Path, manifest: Manifest, rel: str) -> None:
+    """Drops what the library holds of mesh file `rel` (its object, folder and rejection)."""
+    import shutil
+
+    for obj in [o for o in manifest.objects if o.source == rel]:
+        shutil.rmtree(out / obj.id, ignore_errors=True)
+    manifest.objects = [o for o in manifest.objects if o.source != rel]
+    manifest.rejected = [r for r in manifest.rejected if r.source != rel]
+
+
 def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
                   cfg: ProcessConfig | None = None, progress: bool = True,
                   say: Callable[[str], None] | None = None) -> Manifest:
@@ -418,10 +429,20 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
     out.mkdir(parents=True, exist_ok=True)
     timings = _load_timings(out)
     done = {o.source for o in manifest.objects} | {r.source for r in manifest.rejected}
+    # Each mesh file's sha256 as it was built: a rerun rebuilds a file that changed since
+    # instead of keeping the old shape (libraries from before this record are not checked).
+    hashes = manifest.extra.setdefault("source_sha256", {})
     for path in tqdm(files, disable=not progress, desc="ingest"):
         rel = str(path.relative_to(source))
-        if rel in done:
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        if rel in done and hashes.get(rel, digest) != digest:
+            _forget(out, manifest, rel)
+            if say is not None:
+                say(f"{rel}: changed since library {out} built it (its sha256 differs): "
+                    "built again")
+        elif rel in done:
             continue
+        hashes[rel] = digest
         obj_seed = zlib.crc32(f"{seed}:{rel}".encode())
         rng = np.random.default_rng(obj_seed)
         try:

@@ -186,6 +186,7 @@ def run(args) -> int:
     from corn_drake.rl.dagger import DaggerTrainer
     from corn_drake.rl.pretrained_encoders import check_pretrained
     from corn_drake.run_folders.config_file import run_config_path
+    from corn_drake.run_folders.inputs_record import record_inputs, refuse_changed_inputs
     from corn_drake.run_folders.resumable import ResumableRun
 
     if not run_config_path(args.out).is_file() and args.teacher is None:
@@ -211,13 +212,24 @@ def run(args) -> int:
         student = student_from_encoder(cfg.encoder, cfg.frozen)
         check_pretrained(student.encoder, cfg.encoder, cfg.allow_weak_encoder)
         trainer = DaggerTrainer(cfg, run_folder.out, student, teacher)  # reads, writes nothing
+        # The teacher's very weights: a resume after it trained further would mix two teachers.
+        inputs = {"teacher_weights": teacher_weights_hash(cfg.teacher)}
+        refuse_changed_inputs(run_folder.out, inputs, "a student run")
         run_folder.write_config(cfg, f"teacher {cfg.teacher} ({teacher_cfg.policy}), perception "
                                      f"{cfg.env.segmentation.mode}, {cfg.total_steps} steps",
                                 kind="student run", at_step=trainer.global_step)
+        record_inputs(run_folder.out, inputs)
         with torch_threads(args.torch_threads):
             metrics = trainer.train(progress=not args.no_progress)
     print(f"distilled {metrics['global_step']} steps; run folder {run_folder.out}")
     return 0
+
+
+def teacher_weights_hash(run: str) -> str:
+    """rl/run_loading.weights_hash of the teacher run's config and last.pt."""
+    from corn_drake.rl.run_loading import weights_hash
+
+    return weights_hash(Path(run), Path(run) / "checkpoints" / "last.pt")
 
 
 def argument_of_field(field: str) -> str:

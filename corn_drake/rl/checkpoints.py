@@ -86,6 +86,7 @@ def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[Train
     if loaded is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
+    check_env_hash(state, cfg, run_dir, used)
     encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
     if any(k.startswith("feature_normalizer.") for k in state["agent"]):
         raise InputError(f"{used}: trained with normalize_features, which was retired "
@@ -127,6 +128,7 @@ def load_student_run_with_step(run_dir: str | Path):
     if loaded is None or loaded[0]["kind"] != "student":
         raise MissingInputError(f"no student checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
+    check_env_hash(state, cfg, run_dir, used)
     student = StudentPolicy()
     try:
         student.load_state_dict(state["student"])
@@ -194,3 +196,41 @@ def init_agent_state(source: str | Path) -> dict:
     if state is None:
         raise MissingInputError(f"--init-from {source}: no checkpoint (expected {ckpt})")
     return state["agent"]
+
+
+# --- the config a checkpoint was trained with ---------------------------------------------------
+def env_hash(cfg) -> str:
+    """sha256 of what a run's episodes are (its `env`, and a primitive run's `primitive`
+    settings), the library's path left out (a library may move): saved in every checkpoint, so
+    a config.yaml edited afterwards (task push -> full6d) cannot make a report say it measured
+    what the weights were not trained on."""
+    import dataclasses
+    import hashlib
+    import json
+
+    parts = {"env": dataclasses.asdict(cfg.env)}
+    if getattr(cfg, "primitive", None) is not None:
+        parts["primitive"] = dataclasses.asdict(cfg.primitive)
+    _drop_library_paths(parts)
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _drop_library_paths(value) -> None:
+    if isinstance(value, dict):
+        value.pop("library", None)
+        for item in value.values():
+            _drop_library_paths(item)
+
+
+def check_env_hash(state: dict, cfg, run_dir, checkpoint) -> None:
+    """An InputError naming the run's config.yaml when `state` (a checkpoint) was trained with
+    another env than `cfg` says; checkpoints from before the hash was saved are not checked."""
+    from corn_drake.errors import InputError
+    from corn_drake.run_folders.config_file import run_config_path
+
+    saved = state.get("env_sha256")
+    if saved is not None and saved != env_hash(cfg):
+        raise InputError(f"{run_config_path(Path(run_dir))}: its env (task, scene, controller, "
+                         f"primitive settings) is not the one {checkpoint} was trained with: "
+                         "the config was edited after training; restore it (evaluate --task / "
+                         "--set change what an evaluation plays without editing the run)")

@@ -54,19 +54,9 @@ class LoadedRun:
         weights were loaded from and the chooser's model files beside them (None for a
         reference or the planner). A report records it; `ship` packs only the weights whose
         hash the report it quotes recorded."""
-        import hashlib
-
-        from corn_drake.run_folders.config_file import run_config_path
-
         if self.kind in ("reference", "planner"):
             return None
-        digest = hashlib.sha256()
-        folder = Path(self.run)
-        files = [run_config_path(folder), self.checkpoint_path,
-                 *(folder / name for name in CHOOSER_FILES if (folder / name).is_file())]
-        for path in files:
-            digest.update(path.name.encode() + b"\0" + Path(path).read_bytes())
-        return digest.hexdigest()
+        return weights_hash(Path(self.run), self.checkpoint_path)
 
     def report_fields(self) -> dict:
         """What a report of this run records of the weights it measured ({} for a reference):
@@ -147,6 +137,21 @@ class LoadedRun:
         student_cfg.check()
         return student_cfg, {"trained_perception": trained_with,
                              "observation_noise": dataclasses.asdict(student_cfg.observation)}
+
+
+def weights_hash(run_dir: Path, checkpoint: Path) -> str:
+    """sha256 over run folder `run_dir`'s config.yaml, its weights' `checkpoint` file and the
+    chooser files beside them (CHOOSER_FILES)."""
+    import hashlib
+
+    from corn_drake.run_folders.config_file import run_config_path
+
+    digest = hashlib.sha256()
+    files = [run_config_path(run_dir), checkpoint,
+             *(run_dir / name for name in CHOOSER_FILES if (run_dir / name).is_file())]
+    for path in files:
+        digest.update(Path(path).name.encode() + b"\0" + Path(path).read_bytes())
+    return digest.hexdigest()
 
 
 def run_kind_of(run: str, references: bool = True) -> str:

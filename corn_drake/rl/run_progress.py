@@ -57,9 +57,11 @@ def progress_state(run) -> dict:
     """What a checkpoint holds of `run`'s progress (a PPO Trainer or a DaggerTrainer): its
     counters, history, recent episodes, per-object counts and the random streams it draws from
     (`run.generator`, `run.np_rng`, torch's global one). restore_progress reads it back."""
+    from corn_drake.rl.checkpoints import env_hash
+
     return {**{name: getattr(run, name) for name in PROGRESS_FIELDS},
             "torch_rng": torch.get_rng_state(), "generator": run.generator.get_state(),
-            "np_rng": run.np_rng.bit_generator.state}
+            "np_rng": run.np_rng.bit_generator.state, "env_sha256": env_hash(run.cfg)}
 
 
 def restore_progress(run, state: dict) -> None:

@@ -174,6 +174,10 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     if loaded is None:
         raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
     state, used = loaded
+    if cfg.chooser == "critic":  # a chooser's folder carries its proposing run's checkpoint
+        from corn_drake.rl.checkpoints import check_env_hash
+
+        check_env_hash(state, cfg, run_dir, used)
     encoder = load_encoder("corn", run_encoder_path(run_dir, cfg.encoder), cfg.allow_weak_encoder)
     agent = agent_for(cfg, encoder)
     agent.load_network_state(state["agent"], used)

@@ -33,6 +33,7 @@ import torch
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.contract import RECENT_EPISODES
 from corn_drake.errors import InputError
+from corn_drake.rl.checkpoints import env_hash
 from corn_drake.rl.device import training_device
 from corn_drake.rl.primitive.hindsight import HindsightRule
 from corn_drake.rl.primitive.agent import agent_for
@@ -100,7 +101,8 @@ class PrimitiveTrainer:
                  "learner": to_cpu(self.learner.state_dict()), "global_step": self.global_step,
                  "episodes": self.episodes, "history": self.history,
                  "recent_episodes": self.recent_episodes, "np_rng": self.np_rng.bit_generator.state,
-                 "torch_rng": torch.get_rng_state(), "replay_file": replay_file}
+                 "torch_rng": torch.get_rng_state(), "replay_file": replay_file,
+                 "env_sha256": env_hash(self.cfg)}
         # Saved again at the same step (a run's last save after its periodic one): last.pt is
         # rewritten in place, and prev.pt stays the step before with its own replay, so that a
         # damaged newest replay still has an older consistent pair to resume from.

@@ -141,7 +141,20 @@ def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int 
     primitive = dataclasses.replace(cfg.primitive, success_at_rest=at_rest,
                                     settle_steps=settle_steps)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    # What the folder's files are made of: another run, library or setting added to it later
+    # would mix data (processes with other --start values share these).
+    from corn_drake.assets.content_hash import library_content_hash
+    from corn_drake.rl.checkpoints import agent_weights_folder
+    from corn_drake.rl.run_loading import weights_hash
+    from corn_drake.run_folders.inputs_record import check_inputs
+
+    checkpoint = agent_weights_folder(Path(run), base.agent_weights) / "checkpoints" / \
+        agent.checkpoint_file
+    check_inputs(out, {"run_weights": weights_hash(Path(run), checkpoint),
+                       "library": library_content_hash(objects, ids), "chunk": chunk,
+                       "random_motions": random_motions, "follow_policy": follow_policy,
+                       "at_rest": at_rest, "settle_steps": settle_steps, "sets": list(sets)},
+                 "outcome data")
     envs, written, end = {}, [], start + episodes
     for first in range(start, end, chunk):
         path = chunk_path(out, first)
