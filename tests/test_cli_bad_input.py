@@ -243,6 +243,16 @@ ROWS += [
          "--seed"),
     _row(f"fit-outcome {PROPOSER} --data {{root}}/lib --out-run {{root}}/out", "{root}/out"),
 ]
+# Relations and sizes (issue 63): a run too short to update, sizes past what memory holds.
+ROWS += [
+    _row("train --policy primitive --steps 100 --out {root}/out/p", "total_steps",
+         "learning_starts"),
+    _row("train --policy primitive --set primitive.push_distance=1e300 --out {root}/out/p",
+         "primitive.push_distance", "(0, 0.5]"),
+    _row("train --policy primitive --set replay_capacity=1000000000000 --out {root}/out/p",
+         "replay_capacity"),
+    _row("train --envs-per-worker 100000 --out {root}/out/t", "envs_per_worker"),
+]
 # The expert's labels and the chooser fitted to them (issue 61).
 ROWS += [
     _row("label --objects {root}/nosuch --out {root}/out/l", "--objects {root}/nosuch"),

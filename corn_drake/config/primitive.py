@@ -36,11 +36,13 @@ def at_rest(speed: dict, linear: float = REST_LINEAR_SPEED,
 @dc.dataclass
 class PrimitiveConfig:
     # Range checks (config/bounds.py): what check_bounds refuses.
-    BOUNDS = {"pre_contact_distance": "> 0", "clearance": "> 0", "min_tool_height": ">= 0",
-              "push_distance": "> 0", "push_steps": ">= 1", "retreat_height": ">= 0",
-              "retreat_steps": ">= 1", "reach_tolerance": "> 0", "turn_tolerance": "> 0",
-              "approach_steps": ">= 1",
-              "max_primitives": ">= 1", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
+    # Upper bounds: distances within the table's reach (push_distance=1e300 was taken and
+    # then failed deep in the planner), counts an episode can play.
+    BOUNDS = {"pre_contact_distance": "(0, 0.2]", "clearance": "(0, 0.5]",
+              "min_tool_height": "[0, 0.2]", "push_distance": "(0, 0.5]", "push_steps": "[1, 100]",
+              "retreat_height": "[0, 0.5]", "retreat_steps": "[1, 100]",
+              "reach_tolerance": "(0, 0.1]", "turn_tolerance": "(0, 3.1416]",
+              "approach_steps": "[1, 1000]", "max_primitives": "[1, 1000]", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
               "progress_reward": ">= 0", "push_height": ">= 0", "finger_tilt_deg": "[0, 60]",
               "rest_linear_speed": "> 0", "rest_angular_speed": "> 0",
               "settle_steps": ">= 0", "settle_motion": "> 0"}
@@ -128,11 +130,15 @@ class PrimitiveTrainConfig(RunSettings):
     env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
     holds `learning_starts` transitions. The TD3 numbers are set here only
     (rl/primitive/td3.TD3Settings.for_run reads them)."""
-    BOUNDS = {"replay_capacity": ">= 1", "learning_starts": ">= 1", "updates_per_step": ">= 0",
+    # replay_capacity's bound: ~20 KB per transition (the 16 locations' tokens and features, now
+    # and next), so a million is ~20 GB at most (np.zeros pages in lazily; 1e12 was a
+    # MemoryError after the config was written); hidden: 4096 is 16x the shipped 256.
+    BOUNDS = {"replay_capacity": "[1, 1000000]", "learning_starts": ">= 1",
+              "updates_per_step": ">= 0",
               "batch_size": ">= 1", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
               "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
-              "random_steps": ">= 0", "log_every": ">= 1", "hidden": ">= 1",
+              "random_steps": ">= 0", "log_every": ">= 1", "hidden": "[1, 4096]",
               "hindsight_goals": ">= 0",
               "policy": one_of((PRIMITIVE_POLICY,)), "chooser": one_of(PRIMITIVE_CHOOSERS),
               # Run folders: rl/checkpoints resolves and loads them, naming the field.
@@ -144,6 +150,11 @@ class PrimitiveTrainConfig(RunSettings):
                  "replay_capacity"),
         relation("batch_size", "<= {replay_capacity}", lambda batch, cap: batch <= cap,
                  "replay_capacity"),
+        # With no update before learning_starts, a shorter run saved an untrained policy as
+        # trained (issue 63); one that starts from trained weights (init_from) may be short.
+        relation("total_steps", "> {learning_starts} (no update happens before it) unless "
+                 "{init_from} names trained weights", lambda steps, start, init: steps > start
+                 or bool(init), "learning_starts", "init_from"),
     )
     policy: str = "primitive"
     # How evaluation chooses: "critic", the location of highest Q with the actor's motion there;

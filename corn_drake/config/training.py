@@ -79,7 +79,10 @@ class RunSettings:
     set of flags (arguments/run_flags.py) and bounds."""
     # Range checks (config/bounds.py): what check_bounds refuses.
     BOUNDS = {
-              "total_steps": ">= 1", "workers": ">= 0", "envs_per_worker": ">= 1", "seed": "seed",
+              # envs_per_worker: each env is a Drake diagram of ~60 MB; 100000 hung for minutes
+              # building them before failing.
+              "total_steps": ">= 1", "workers": ">= 0", "envs_per_worker": "[1, 256]",
+              "seed": "seed",
               "checkpoint_every": ">= 1",
               # Free text: Ray and the encoder loader say what is wrong with them, with their
               # flag (--ray-address, --encoder), before anything is written.
