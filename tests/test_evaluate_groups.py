@@ -62,3 +62,20 @@ def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
         assert key in data  # the report keeps its keys
     # ...and says which task and action step it was run on.
     assert (data["task"], data["action_step"]) == ("push", 0.03)
+
+
+def test_evaluate_names_the_objects_its_split_leaves_out(tmp_path, capsys):
+    """A library of one's own is split too: evaluating its unseen objects says which of the
+    others it skipped, and --split all skips none."""
+    from corn_drake.cli import main
+    from tests.fixtures import write_loadable_library
+
+    lib = write_loadable_library(tmp_path / "lib", 2, 1)
+    common = ["evaluate", "--run", "still", "--objects", str(lib), "--task", "push",
+              "--episodes", "1", "--record", "0", "--no-progress"]
+    assert main([*common, "--report", str(tmp_path / "a.json")]) == 0
+    said = capsys.readouterr().out
+    assert "1 unseen objects of" in said and "'s 3; skipped" in said
+    assert "box_00" in said and "cylinder_01" in said and "--split all" in said
+    assert main([*common, "--split", "all", "--report", str(tmp_path / "b.json")]) == 0
+    assert "skipped" not in capsys.readouterr().out

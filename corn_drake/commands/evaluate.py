@@ -130,6 +130,12 @@ def _object_specs(args, cfg):
         raise InputError(f"no {args.split} objects in library {library}"
                          f"{empty_split_hint(library, args.split)}")
     warn_if_other_library(args.run, library, ids)
+    skipped = [i for i in list_objects(library) if i not in set(ids)]
+    if skipped:  # a library of one's own meshes is split too: say what is left out
+        shown = ", ".join(skipped[:6]) + (f" and {len(skipped) - 6} more" if len(skipped) > 6
+                                          else "")
+        print(f"{len(ids)} {args.split} objects of {library}'s {len(ids) + len(skipped)}; "
+              f"skipped (other splits: --split all takes every one): {shown}")
     return [(i, load_object_spec(library, i)) for i in ids]
 
 
