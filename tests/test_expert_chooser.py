@@ -124,6 +124,10 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     assert settings["library_content_hash"] and "learner" not in settings
     assert {r["object"] for r in records} == set(settings["objects"])  # train objects only
     assert all(len(d["pose"]) == 7 for r in records for d in r["decisions"])
+    # The state each beam candidate reached is labelled too (its candidates' rewards).
+    reached = [c for r in records for d in r["decisions"] for c in d["children"]]
+    assert reached and all(len(c["pose"]) == 7 and c["labels"] for c in reached)
+    assert all(row[-1] is None for c in reached for row in c["labels"])
     run = tmp_path / "chooser"
     assert main(["fit-chooser", "--labels", str(out.parent), "--objects", str(library),
                  "--out-run", str(run), "--updates", "20", "--tokens", "--no-progress",
@@ -131,6 +135,9 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
                  str(out.with_name("r0.labels.jsonl"))]) == 0
     printed = capsys.readouterr().out
     assert "validation: picks the expert's candidate" in printed
+    searched = sum(len(r["decisions"]) for r in records)
+    assert f"states ({searched} searched" in printed
+    assert f"fitted to {searched + len(reached)} states" in printed
     assert any((tmp_path / "cache").glob("*.npz"))
     assert main(["fit-chooser", "--labels", str(out.parent), "--objects", str(library),
                  "--out-run", str(run), "--no-progress"]) == 2  # never replaces a folder

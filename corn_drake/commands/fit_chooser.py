@@ -87,7 +87,9 @@ def run(args) -> int:
     model = fit_value(data, args.tokens, args.updates, args.seed, history=history)
     facts = {"tokens": args.tokens, "beam": args.beam, "bank": args.bank,
              "updates": args.updates, "seed": args.seed, "proposer": proposer,
-             "states": int(len(data["chosen"])), "rows": int(len(data["reward"])),
+             "states": int(len(data["chosen"])),
+             "searched_states": int((data["chosen"] >= 0).sum()),
+             "rows": int(len(data["reward"])),
              "objects": int(len(set(data["object"]))),
              "labels": {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
              "train_agreement": agreement(model, data, args.tokens, args.beam),
@@ -104,8 +106,9 @@ def run(args) -> int:
     write_outcome_run(run_folder, cfg, outcome.model, outcome.facts["tokens"], kept,
                       args.out_run,
                       more={MODEL_FILE: lambda path: save_value_model(path, model, **facts)})
-    print(f"fitted to {facts['states']} states ({facts['rows']} candidates, "
-          f"{facts['objects']} objects); wrote {args.out_run}")
+    print(f"fitted to {facts['states']} states ({facts['searched_states']} searched, the rest "
+          f"reached by the search's beam; {facts['rows']} candidates, {facts['objects']} "
+          f"objects); wrote {args.out_run}")
     for name in ("train_agreement", "validation"):
         if name in facts:
             m = facts[name]

@@ -69,9 +69,10 @@ def play(env, planner, seed: int, labeller: "Labeller | None" = None) -> dict:
             break
     end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
     labels = [{"chosen": d["chosen"], "executed": d["executed"], "pose": d["pose"],
-               "labels": d["labels"], **({"actor": d["actor"]} if "actor" in d else {})}
-              for d in planner.decisions]
-    decisions = [{k: v for k, v in d.items() if k not in ("labels", "executed", "pose")}
+               "labels": d["labels"], "children": d["children"],
+               **({"actor": d["actor"]} if "actor" in d else {})} for d in planner.decisions]
+    decisions = [{k: v for k, v in d.items()
+                  if k not in ("labels", "executed", "pose", "children")}
                  for d in planner.decisions]
     distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
     row = {"success": bool(status.get("success", 0) > 0), "steps": int(env.steps),

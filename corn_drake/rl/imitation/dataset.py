@@ -9,8 +9,9 @@ one). The arrays of one labels file are kept in a cache folder under the file's
 sha256, so a second fit reads them at once.
 
 Arrays (one row per candidate): "x" (R, F) the features with the token last, "reward" (R,), "value"
-(R,) NaN outside the beam, "state" (R,) the state's index; per state: "chosen" (S,) the expert's
-choice as a row index, "object" (S,), "drift" (S,) |replayed - recorded reward| of the executed
+(R,) NaN outside the beam, "state" (R,) the state's index; per state (a searched state, then the
+states its beam's candidates reached, search.child_labels): "chosen" (S,) the expert's choice as
+a row index (-1 at a reached state, where the expert chose nothing), "object" (S,), "drift" (S,) |replayed - recorded reward| of the executed
 primitive where a state was replayed (0 where it was rebuilt from its pose).
 """
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from corn_drake.errors import InputError
 
-CACHE_VERSION = 1  # bump when features.py changes what a row holds
+CACHE_VERSION = 2  # bump when what a row or state holds changes (2: reached states)
 LABELS_SUFFIX = ".labels.jsonl"
 
 
@@ -115,25 +116,31 @@ def state_arrays(path: Path, library: Path, progress: bool = False) -> dict:
     for record in bar:
         env = PrimitiveEnv(cfg, primitive, load_object_spec(library, record["object"]))
         for obs, decision, off in labelled_states(env, record, columns):
-            labels = [r for r in decision["labels"] if r[col["source"]] == "policy"]
-            if len(labels) != len(decision["labels"]):
-                raise InputError(f"{path}: episode {record['episode']} has candidates of "
-                                 "other sources than the policy")
-            rows = [(int(r[col["location"]]), int(r[col["point"]]),
-                     np.array([r[col["motion_x"]], r[col["motion_y"]], r[col["motion_z"]]]))
-                    for r in labels]
-            features, _ = agent.features(obs)
-            c = candidates_of(agent, obs, features, rows)
-            predicted = outcome.scores(c, cfg.task, primitive.progress_reward)
-            xs.append(candidate_features(c, predicted, tokens=True).numpy())
-            rewards.append([r[col["reward"]] for r in labels])
-            values.append([np.nan if r[col["value"]] is None else r[col["value"]]
-                           for r in labels])
-            states.append(np.full(len(labels), len(chosen)))
-            chosen.append(row_count + int(decision["chosen"]))
-            objects.append(record["object"])
-            drift.append(off)
-            row_count += len(labels)
+            # The searched state, then the states its beam's candidates reached (their
+            # rewards known, their values not: `chosen` -1).
+            states_here = [(obs, decision["labels"], int(decision["chosen"]), off)]
+            for child in decision.get("children", []):
+                env.place_object(child["pose"])
+                states_here.append((env.observation(), child["labels"], -1, 0.0))
+            for state_obs, labels, choice, distance in states_here:
+                if any(r[col["source"]] != "policy" for r in labels):
+                    raise InputError(f"{path}: episode {record['episode']} has candidates of "
+                                     "other sources than the policy")
+                rows = [(int(r[col["location"]]), int(r[col["point"]]),
+                         np.array([r[col["motion_x"]], r[col["motion_y"]], r[col["motion_z"]]]))
+                        for r in labels]
+                features, _ = agent.features(state_obs)
+                c = candidates_of(agent, state_obs, features, rows)
+                predicted = outcome.scores(c, cfg.task, primitive.progress_reward)
+                xs.append(candidate_features(c, predicted, tokens=True).numpy())
+                rewards.append([r[col["reward"]] for r in labels])
+                values.append([np.nan if r[col["value"]] is None else r[col["value"]]
+                               for r in labels])
+                states.append(np.full(len(labels), len(chosen)))
+                chosen.append(row_count + choice if choice >= 0 else -1)
+                objects.append(record["object"])
+                drift.append(distance)
+                row_count += len(labels)
     if not chosen:
         raise InputError(f"{path}: no labelled states")
     return {"x": np.concatenate(xs).astype(np.float32),
@@ -152,7 +159,7 @@ def load_label_arrays(paths: list[Path], library: Path, cache: Path | None,
     for path in label_files(paths):
         arrays = file_arrays(path, library, cache, progress)
         arrays["state"] = arrays["state"] + states
-        arrays["chosen"] = arrays["chosen"] + rows
+        arrays["chosen"] = np.where(arrays["chosen"] >= 0, arrays["chosen"] + rows, -1)
         rows += len(arrays["reward"])
         states += len(arrays["chosen"])
         for k, v in arrays.items():

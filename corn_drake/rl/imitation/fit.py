@@ -74,12 +74,14 @@ def agreement(model: ValueNet, data: dict, tokens: bool, beam: int) -> dict:
     """How the chooser's picks compare with the expert's at `data`'s states: the share where it
     picks the expert's candidate; the mean reward of its pick against the expert's and against
     the best one-step reward there; the share of picks the expert valued (in its beam)."""
-    chosen = picks(model, data, tokens, beam)
+    searched = data["chosen"] >= 0  # the states the expert chose at (not those reached)
+    chosen = picks(model, data, tokens, beam)[searched]
+    expert = data["chosen"][searched]
     reward, value, state = data["reward"], data["value"], data["state"]
-    best = np.array([reward[state == s].max() for s in range(len(chosen))])
+    best = np.array([reward[state == s].max() for s in np.flatnonzero(searched)])
     return {"states": int(len(chosen)),
-            "agreement": float(np.mean(chosen == data["chosen"])),
+            "agreement": float(np.mean(chosen == expert)),
             "pick_reward": float(np.mean(reward[chosen])),
-            "expert_reward": float(np.mean(reward[data["chosen"]])),
+            "expert_reward": float(np.mean(reward[expert])),
             "best_reward": float(np.mean(best)),
             "pick_in_beam": float(np.mean(~np.isnan(value[chosen])))}

@@ -73,11 +73,15 @@ class Planner:
         """The indices of the `beam` branches with the most reward (stable on ties)."""
         return sorted(range(len(branches)), key=lambda i: -branches[i].reward)[:self.config.beam]
 
-    def _value(self, env, branch: Branch, levels: int) -> float:
-        """`branch`'s reward plus the discounted best value `levels` levels below it."""
+    def _value(self, env, branch: Branch, levels: int, record: list | None = None) -> float:
+        """`branch`'s reward plus the discounted best value `levels` levels below it; given
+        `record`, the state `branch` reached and its children's rewards are appended to it (a
+        root candidate's next state: more labelled states at no cost, see `child_labels`)."""
         if branch.done or levels == 0:
             return branch.reward
         children = self._expand(env, branch.snapshot, branch.step[0])
+        if record is not None and children:
+            record.append(child_labels(branch, children))
         if not children:  # no usable contact there: nothing more to add
             return branch.reward
         if levels == 1:
@@ -97,11 +101,16 @@ class Planner:
         if not first:
             raise InputError("planner: no candidate primitive at this state (no usable contact "
                              "location for any of planner.sources)")
+        children: list[dict] = []
         if self.config.depth == 1:
             chosen, values = best(first), {}
         else:
-            values = {i: self._value(env, first[i], self.config.depth - 1)
-                      for i in self._beam(first)}
+            values = {}
+            for i in self._beam(first):
+                before = len(children)
+                values[i] = self._value(env, first[i], self.config.depth - 1, children)
+                for child in children[before:]:
+                    child["root"] = i
             chosen = max(values, key=lambda i: values[i])  # the first of the beam on a tie
         branch = first[chosen]
         decision = {"source": branch.candidate.source, "reward": branch.reward,
@@ -109,7 +118,8 @@ class Planner:
                     "simulated": self.simulated,
                     "cpu_seconds": time.process_time() - started, "candidates": len(first),
                     "labels": [label_of(b, values.get(i)) for i, b in enumerate(first)],
-                    "executed": executed(branch.candidate), "pose": pose}
+                    "executed": executed(branch.candidate), "pose": pose,
+                    "children": children}
         return decision, branch
 
     def act(self, env, obs) -> tuple:
@@ -129,6 +139,15 @@ def label_of(branch: Branch, value: float | None) -> list:
     return [c.source, c.point, c.location, *(round(float(m), 4) for m in c.motion),
             round(branch.reward, LABEL_DIGITS),
             None if value is None else round(float(value), LABEL_DIGITS)]
+
+
+def child_labels(branch: Branch, children: list[Branch]) -> dict:
+    """The state a root candidate of the beam reached, as a labelled state: the object's pose
+    there and a label row per candidate proposed there with the reward it earned (its value is
+    not known: the search stops one level on). Four of these per decision at the default beam
+    make five labelled states per search instead of one."""
+    return {"pose": [round(float(v), POSE_DIGITS) for v in branch.pose],
+            "labels": [label_of(c, None) for c in children]}
 
 
 def executed(candidate) -> dict:
