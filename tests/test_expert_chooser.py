@@ -194,3 +194,26 @@ def test_labels_of_other_objects_are_refused(library, tmp_path):
     path.write_text(json.dumps({"settings": settings, "columns": []}) + "\n")
     with pytest.raises(InputError, match="content hash differs"):
         state_arrays(path, library)
+
+
+def test_label_over_ray_workers_writes_the_same_episodes(library, tmp_path):
+    """`label --workers 2`: the episodes played in two Ray worker processes, the objects sent
+    through the object store, land in the rows and labels files as one process writes them (the
+    same episodes, objects and seeds, every state labelled), and a rerun resumes."""
+    from corn_drake.cli import main
+    from corn_drake.rl.planner.labels import read_labels
+
+    argv = ["label", "--objects", str(library), "--episodes", "3", "--no-progress", *TINY]
+    assert main([*argv, "--out", str(tmp_path / "one")]) == 0
+    assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
+    one = read_labels(tmp_path / "one.labels.jsonl")
+    two = read_labels(tmp_path / "two.labels.jsonl")
+    assert one[0] == two[0]  # the same settings: parts of one labelling merge
+    key = lambda r: (r["episode"], r["object"], r["seed"])  # noqa: E731
+    assert sorted(map(key, one[2])) == sorted(map(key, two[2])) and len(two[2]) == 3
+    assert all(d["labels"] for r in two[2] for d in r["decisions"])
+    report = json.loads((tmp_path / "two.json").read_text())
+    assert report["complete"] and len(report["episodes"]) == 3
+    before = (tmp_path / "two.rows.jsonl").read_text()
+    assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
+    assert (tmp_path / "two.rows.jsonl").read_text() == before

@@ -12,7 +12,8 @@ import pytest
 
 from corn_drake.config.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError
-from corn_drake.evaluation.planner_episodes import cloud_distance, wilson
+from corn_drake.evaluation.planner_episodes import wilson
+from corn_drake.evaluation.planner_play import cloud_distance
 from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
 from corn_drake.rl.envs.branching import Candidate
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv

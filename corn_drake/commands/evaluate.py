@@ -58,6 +58,12 @@ def add_arguments(parser):
                         help="which objects of the library the episodes go round-robin over")
     parser.add_argument("--episodes", type=positive_int, default=10,
                         help="episodes in all, round-robin over the objects")
+    parser.add_argument("--workers", type=nonnegative_int, default=0,
+                        help="--run planner only: Ray workers playing episodes side by side "
+                             "(0: in this process)")
+    parser.add_argument("--ray-address", default="",
+                        help="--run planner only: a Ray cluster's address for --workers "
+                             "(default: a Ray of this process's own)")
     parser.add_argument("--episodes-from", type=nonnegative_int, default=0, metavar="K",
                         help="--run planner only: play episodes K..--episodes-1 (to spread "
                              "them over processes; a rerun resumes REPORT.rows.jsonl)")
@@ -173,6 +179,11 @@ def _refuse_flags(args, kind: str) -> None:
     if kind == "reference" and args.attention:
         raise InputError(f"--attention shows a learned policy's cross-attention; --run "
                          f"{args.run} is a reference controller, which has none")
+    if (args.workers or args.ray_address) and kind != "planner":
+        raise InputError(f"--workers and --ray-address apply to --run planner; --run {args.run} "
+                         "plays its episodes in this process")
+    if args.ray_address and not args.workers:
+        raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
     if args.episodes_from and kind != "planner":
         raise InputError(f"--episodes-from applies to --run planner; --run {args.run} plays "
                          "episodes 0..--episodes-1")
@@ -249,7 +260,9 @@ def _evaluate(args, report_path: Path, out_dir: Path):
 
             report = evaluate_planner(loaded.agent, cfg, objects,
                                       range(args.episodes_from, args.episodes), args.seed,
-                                      report_path, progress=not args.no_progress)
+                                      report_path, progress=not args.no_progress,
+                                      workers=args.workers, ray_address=args.ray_address,
+                                      library=Path(args.objects) if args.objects else None)
         else:
             with torch_threads(args.torch_threads):
                 report = evaluate(loaded.agent, cfg, objects, args.episodes, args.record,

@@ -51,12 +51,16 @@ def add_arguments(parser):
                         help="path of the labels without suffix: OUT.labels.jsonl, "
                              "OUT.rows.jsonl and OUT.json are written (e.g. "
                              "models/labels/full6d/round1)")
+    parser.add_argument("--workers", type=nonnegative_int, default=0,
+                        help="Ray workers labelling episodes side by side (0: in this process)")
+    parser.add_argument("--ray-address", default="",
+                        help="a Ray cluster's address for --workers (default: a Ray of this "
+                             "process's own)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _labeller(args, primitive, task):
-    from corn_drake.evaluation.planner_episodes import Labeller
-    from corn_drake.rl.planner.sources import load_policy
+    from corn_drake.evaluation.planner_play import labeller_of
 
     beta = args.beta if args.beta is not None else (0.0 if args.learner else 1.0)
     if not 0.0 <= beta <= 1.0:
@@ -66,8 +70,7 @@ def _labeller(args, primitive, task):
             raise InputError(f"--beta {beta}: without --learner only the expert can act "
                              "(give --learner RUN)")
         return None
-    learner = load_policy(args.learner, primitive, task)
-    return Labeller(learner, beta, {"learner": str(args.learner), "beta": beta})
+    return labeller_of({"learner": str(args.learner), "beta": beta}, primitive, task)
 
 
 def run(args) -> int:
@@ -81,6 +84,8 @@ def run(args) -> int:
     if args.episodes_from >= args.episodes:
         raise InputError(f"--episodes-from {args.episodes_from}: no episodes before --episodes "
                          f"{args.episodes}")
+    if args.ray_address and not args.workers:
+        raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
     if args.out.suffix in (".json", ".jsonl"):
         raise InputError(f"--out {args.out}: give the path without a suffix (OUT.labels.jsonl "
                          "and the others are written beside it)")
@@ -107,7 +112,8 @@ def run(args) -> int:
         report = evaluate_planner(loaded.agent, run_cfg.env, objects,
                                   range(args.episodes_from, args.episodes), args.seed,
                                   report_path, progress=not args.no_progress,
-                                  labeller=labeller, facts=facts)
+                                  labeller=labeller, facts=facts, workers=args.workers,
+                                  ray_address=args.ray_address, library=args.objects)
     decisions = report["decisions"]
     print(f"{len(report['episodes'])} episodes, {decisions} labelled states "
           f"({report['decisions_per_core_hour'] or 0:.0f} per core-hour); the acting mixture's "

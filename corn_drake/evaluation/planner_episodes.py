@@ -6,13 +6,10 @@ object, k // len(ids)), the env's seed the base seed as policy_env sets it), so 
 compares row by row with any policy's. Each finished episode is appended at once as one JSON
 line to REPORT.rows.jsonl (its first line: the settings); a rerun with the same settings skips
 the episodes already there, and `--episodes-from A --episodes N` plays only k in [A, N), so the
-200 episodes can be spread over processes writing different reports (their rows files
-concatenate). The report is rewritten after every episode.
+200 episodes can be spread over processes writing different reports (merge-reports joins
+them), or over Ray workers (planner_workers.py). The report is rewritten after every episode.
 
-Each row adds to evaluate's: the planner's decisions (simulated primitives and CPU seconds
-each, the sources chosen) and HACMan's criterion beside the task's success (`hacman_success`:
-the mean distance between the object's cloud points at the end and at the goal under 3 cm, the
-object at rest). What every decision's search found of each root candidate (its reward and,
+Each row is planner_play.play's. What every decision's search found of each root candidate (its reward and,
 in the beam, its value: search.label_of) goes to REPORT.labels.jsonl, one line per episode
 (its first line: the settings and the columns), written before the episode's row: the labels a
 learned chooser is fitted to, kept out of the report.
@@ -23,111 +20,16 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import time
 from collections import Counter, defaultdict
 from pathlib import Path
 
 import numpy as np
 
-from corn_drake.config.primitive import at_rest
 from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import episode_seed
-from corn_drake.evaluation.failures import (failure_category, failure_counts, motion_summary,
-                                            successes_ending_still)
+from corn_drake.evaluation.failures import failure_counts, successes_ending_still
+from corn_drake.evaluation.planner_play import Labeller, play
 from corn_drake.storage.atomic_files import write_json, write_text
-from corn_drake.transforms import quat_wxyz_to_matrix
-
-HACMAN_DISTANCE_M = 0.03
-
-
-def cloud_distance(cloud_world: np.ndarray, pose, goal) -> float:
-    """Mean distance (m) between the object's points where they are (`cloud_world`, taken at
-    `pose`) and where they would be at `goal` (HACMan's success measure)."""
-    pose, goal = np.asarray(pose, float), np.asarray(goal, float)
-    R, Rg = quat_wxyz_to_matrix(pose[3:]), quat_wxyz_to_matrix(goal[3:])
-    body = (np.asarray(cloud_world, float) - pose[:3]) @ R
-    return float(np.linalg.norm(body @ Rg.T + goal[:3] - cloud_world, axis=1).mean())
-
-
-def play(env, planner, seed: int, labeller: "Labeller | None" = None) -> dict:
-    """One episode of `planner` on `env` (a PrimitiveEnv with no policy inside) from its start
-    (the search's draws seeded by the episode's seed); the report row, its decisions' labels
-    under "labels". With a `labeller` every state is searched (labelled) as always, but the
-    primitive executed is its learner's where its coin says so (DAgger)."""
-    obs, info = env.reset(seed=seed)
-    planner.reset(seed)
-    coin = None if labeller is None else labeller.coin(seed)
-    start = env.object_pose()
-    status, sim_error, started = info["status"], None, time.process_time()
-    while True:
-        if labeller is None:
-            obs, _, terminated, truncated, info = planner.act(env, obs)
-        else:
-            obs, _, terminated, truncated, info = labeller.step(planner, env, obs, coin)
-        status, sim_error = info.get("status", status), info.get("sim_error")
-        if terminated or truncated:
-            break
-    end, goal = env.object_pose(), np.asarray(env.episode.goal_pose, float)
-    labels = [{"chosen": d["chosen"], "executed": d["executed"], "pose": d["pose"],
-               "labels": d["labels"], "children": d["children"],
-               **({"actor": d["actor"]} if "actor" in d else {})} for d in planner.decisions]
-    decisions = [{k: v for k, v in d.items()
-                  if k not in ("labels", "executed", "pose", "children")}
-                 for d in planner.decisions]
-    distance = None if sim_error else cloud_distance(obs["cloud"], end, goal)
-    row = {"success": bool(status.get("success", 0) > 0), "steps": int(env.steps),
-           "primitives": len(decisions),
-           "position_error": status.get("position_error"),
-           "orientation_error": status.get("orientation_error"), "sim_error": sim_error,
-           "out_of_workspace": bool(status.get("out_of_workspace", 0) > 0),
-           "motion": motion_summary(start, end, goal), "end_speed": env.object_speed(),
-           "hacman_distance": distance,
-           "hacman_success": bool(distance is not None and distance < HACMAN_DISTANCE_M
-                                  and at_rest(env.object_speed())),
-           "kinds_chosen": dict(Counter(d["source"] for d in decisions)),
-           "simulated": int(sum(d["simulated"] for d in decisions)),
-           "cpu_seconds": float(time.process_time() - started),
-           "decisions": decisions, "labels": labels}
-    row["failure"] = failure_category(row, env.teacher_cfg.task)
-    return row
-
-
-@dataclasses.dataclass
-class Labeller:
-    """DAgger's mixture for `corn-drake label`: at every state the expert searches (its labels
-    are kept as always) and then the expert's choice is executed with probability `beta`, else
-    the `learner`'s (a PrimitiveAgent aimed at the evaluation's executor and task), so the
-    labels describe the states the learner visits. The coin is seeded per episode apart from the
-    search's generator: the search's draws are those of an expert-only episode up to the first
-    state the learner changes."""
-    learner: object
-    beta: float
-    facts: dict  # what the labels' settings say of the mixture: learner, beta
-
-    def coin(self, seed: int) -> np.random.Generator:
-        return np.random.default_rng([seed, COIN_STREAM])
-
-    def step(self, planner, env, obs, coin) -> tuple:
-        start = env.snapshot()
-        decision, branch = planner.search(env, obs)
-        if coin.random() < self.beta:
-            env.restore(branch.snapshot)
-            step, decision["actor"] = branch.step, "expert"
-        else:
-            env.restore(start)
-            choice = self.learner.choose(obs)
-            action = {"point": int(choice["point"]),
-                      "motion": np.asarray(choice["motion"], float)}
-            step = env.step(action)
-            decision.update(actor="learner", reward=float(step[1]),
-                            executed={"point": action["point"],
-                                      "motion": [float(m) for m in action["motion"]]})
-        planner.decisions.append(decision)
-        obs, reward, terminated, truncated, info = step
-        return obs, reward, terminated, truncated, dict(info, planner=decision)
-
-
-COIN_STREAM = 1  # the labeller's coin: a stream of the episode's seed the search never draws
 
 
 def read_rows(path: Path, settings: dict | None, repair: bool = True,
@@ -268,12 +170,15 @@ def wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
 
 def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_path: Path,
                      progress: bool = False, labeller: Labeller | None = None,
-                     facts: dict | None = None) -> dict:
+                     facts: dict | None = None, workers: int = 0, ray_address: str = "",
+                     library: Path | None = None) -> dict:
     """Plays evaluate's episodes `episodes` (a range of k) of `policy` (search.PlannerPolicy)
     round-robin over `objects` [(id, ObjectSpec)] in `cfg`'s env, resuming REPORT.rows.jsonl.
     With a `labeller` the states are labelled along its mixture of expert and learner
     (`corn-drake label`); `facts` are more settings the rows and labels files keep (the
-    library's content hash)."""
+    library's content hash). With `workers` the episodes run on that many Ray workers (a
+    cluster's at `ray_address`; the objects of `library`, when they come from one, sent
+    through the object store): planner_workers.py."""
     from tqdm import tqdm
 
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
@@ -298,27 +203,43 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     if not labels_path.exists():
         _append(labels_path, {"settings": settings, "columns": LABEL_COLUMNS})
     done = {r["episode"] for r in rows}
-    envs, planner = {}, policy.planner(cfg.task)
     bar = tqdm(total=len(episodes), initial=len(done), desc="episodes", unit="episode",
                disable=not progress)
+    jobs = []
     for k in episodes:
-        if k in done:
-            continue
-        object_id, spec = objects[k % len(objects)]
-        if object_id not in envs:
-            envs = {object_id: PrimitiveEnv(cfg, policy.primitive, spec)}  # one env alive
-        seed_k = episode_seed(seed, object_id, k // len(objects))
-        row = {"episode": k, "object": object_id, "seed": seed_k,
-               **play(envs[object_id], planner, seed_k, labeller)}
+        if k not in done:
+            object_id, spec = objects[k % len(objects)]
+            jobs.append((k, object_id, spec, episode_seed(seed, object_id, k // len(objects))))
+
+    def finished(row: dict) -> None:
         # The labels first: a kill between the two lines replays the episode, and a reader
         # keeps an episode's last labels line.
-        _append(labels_path, {"episode": k, "object": object_id, "seed": seed_k,
-                              "decisions": row.pop("labels")})
+        _append(labels_path, {"episode": row["episode"], "object": row["object"],
+                              "seed": row["seed"], "decisions": row.pop("labels")})
         _append(rows_path, row)
         rows.append(row)
         write_json(report_path, report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task,
                                           episodes, facts))
         bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
         bar.update()
+
+    if workers:
+        from corn_drake.evaluation.planner_workers import play_on_workers
+        from corn_drake.rl.workers.cluster import pack_objects
+        from corn_drake.rl.workers.ray_workers import init_ray
+
+        init_ray(ray_address or None)
+        packed = pack_objects(library, [o for o, _ in objects]) if library else None
+        if packed is not None:  # the workers read the objects from their node's copy
+            jobs = [(k, object_id, None, seed_k) for k, object_id, _, seed_k in jobs]
+        play_on_workers(jobs, policy, cfg, labeller.facts if labeller else None, packed,
+                        workers, finished)
+    else:
+        env, env_object, planner = None, None, policy.planner(cfg.task)
+        for k, object_id, spec, seed_k in jobs:
+            if object_id != env_object:  # one env alive
+                env, env_object = PrimitiveEnv(cfg, policy.primitive, spec), object_id
+            finished({"episode": k, "object": object_id, "seed": seed_k,
+                      **play(env, planner, seed_k, labeller)})
     bar.close()
     return report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task, episodes, facts)

@@ -231,14 +231,19 @@ class LibraryFiles:
 
 def pack_library(factory) -> LibraryFiles | None:
     """The library `factory`'s envs use, read on the driver; None when they use none (a box)."""
-    from corn_drake.assets.content_hash import combined_hash, object_hashes
-    from corn_drake.assets.manifest import library_file, manifest_path, named_files, read_manifest
-
     obj = factory.teacher_config.scene.object
     if obj.kind != "library":
         return None
-    library = Path(obj.library)
-    ids = factory.train_objects if obj.cycles_library else [obj.object_id]
+    return pack_objects(Path(obj.library),
+                        factory.train_objects if obj.cycles_library else [obj.object_id])
+
+
+def pack_objects(library: Path, ids) -> LibraryFiles:
+    """The files of objects `ids` of `library` (and its manifest), read on the driver."""
+    from corn_drake.assets.content_hash import combined_hash, object_hashes
+    from corn_drake.assets.manifest import library_file, manifest_path, named_files, read_manifest
+
+    library = Path(library)
     objects = {o.id: o for o in read_manifest(library).objects}
     files = {manifest_path(library).name: manifest_path(library).read_bytes()}
     for object_id in ids:
@@ -249,6 +254,14 @@ def pack_library(factory) -> LibraryFiles | None:
                             + files[manifest_path(library).name]).hexdigest()
     return LibraryFiles(ray.get_runtime_context().get_node_id(), str(library), files, hashes,
                         digest)
+
+
+def library_here(library: LibraryFiles) -> Path:
+    """The library's folder as this worker's node holds it: the driver's path on its node,
+    else this node's checked copy."""
+    if ray.get_runtime_context().get_node_id() == library.driver_node:
+        return Path(library.driver_path)
+    return node_copy(library)
 
 
 def arrive(factory, library: LibraryFiles | None):
