@@ -196,7 +196,16 @@ def test_labels_of_other_objects_are_refused(library, tmp_path):
         state_arrays(path, library)
 
 
-def test_label_over_ray_workers_writes_the_same_episodes(library, tmp_path):
+@pytest.fixture
+def own_ray():
+    """A Ray this test starts and stops: the tests after it find none."""
+    import ray
+
+    yield
+    ray.shutdown()
+
+
+def test_label_over_ray_workers_writes_the_same_episodes(library, tmp_path, own_ray):
     """`label --workers 2`: the episodes played in two Ray worker processes, the objects sent
     through the object store, land in the rows and labels files as one process writes them (the
     same episodes, objects and seeds, every state labelled), and a rerun resumes."""
@@ -217,3 +226,47 @@ def test_label_over_ray_workers_writes_the_same_episodes(library, tmp_path):
     before = (tmp_path / "two.rows.jsonl").read_text()
     assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
     assert (tmp_path / "two.rows.jsonl").read_text() == before
+
+
+def test_a_planner_worker_that_dies_is_replaced_and_its_episode_played_again(library, tmp_path,
+                                                                             own_ray):
+    """The first worker to unpack episode 0's object dies (its process exits, as a killed or
+    lost node's would); a new worker plays the episode again from its seed: every episode comes
+    back once."""
+    import os
+
+    from corn_drake.assets.library import list_objects, load_object_spec
+    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
+    from corn_drake.evaluation.planner_workers import play_on_workers
+    from corn_drake.rl.planner.search import PlannerPolicy
+    from corn_drake.rl.workers.ray_workers import init_ray
+
+    marker = tmp_path / "died_once"
+
+    def dies_once(spec):
+        if not marker.exists():
+            marker.write_text("x")
+            os._exit(1)
+        return spec
+
+    class DyingSpec:  # unpickled in the worker: the first unpickling ends its process
+        def __init__(self, spec):
+            self.spec = spec
+
+        def __reduce__(self):
+            return dies_once, (self.spec,)
+
+    run_cfg = PlannerRunConfig(env=load_primitive_env_config("full6d"))
+    primitive = dataclasses.replace(run_cfg.primitive, max_primitives=1)
+    policy = PlannerPolicy(PlannerConfig(sources=["push"], per_kind=1, depth=1), primitive)
+    object_id = list_objects(library, "train")[0]
+    spec = load_object_spec(library, object_id)
+    init_ray()
+    rows = []
+    jobs = [(0, object_id, DyingSpec(spec), 11), (1, object_id, spec, 12)]
+    play_on_workers(jobs, policy, run_cfg.env, None, None, 2, rows.append)
+    assert marker.exists()  # a worker did die
+    assert sorted(r["episode"] for r in rows) == [0, 1]
+    assert all(r["seed"] == seed for r, seed in zip(sorted(rows, key=lambda r: r["episode"]),
+                                                    (11, 12)))
