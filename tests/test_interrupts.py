@@ -131,6 +131,33 @@ def test_a_broken_library_object_is_named_before_training_writes(tmp_path, field
         library_train_ids(str(library))
 
 
+@pytest.mark.parametrize("key, array, message", [
+    ("cloud", "short", r"must be a \(N, 6\) array of points and outward normals, got shape "
+                       r"\(10, 3\)"),
+    ("cloud", "nan", "holds values that are not finite numbers"),
+    ("stable_poses", "inf", "holds values that are not finite numbers"),
+    ("bbox_corners", "short", r"must be a \(8, 3\) array"),
+])
+def test_a_damaged_array_file_is_named_in_one_line(tmp_path, key, array, message):
+    """A library's .npy file of the wrong shape or with NaN: the file named, no traceback."""
+    import numpy as np
+
+    from corn_drake.errors import InputError
+    from corn_drake.rl.envs.vec_env import library_train_ids
+    from tests.fixtures import write_loadable_library
+
+    library = write_loadable_library(tmp_path / "lib", num_train=2)
+    path = library / "box_00" / f"{key}.npy"
+    values = np.load(path)
+    if array == "short":
+        values = np.zeros((10, 3))
+    else:
+        values[0, 0] = np.nan if array == "nan" else np.inf
+    np.save(path, values)
+    with pytest.raises(InputError, match=rf"{path}: the {key} of object 'box_00' {message}"):
+        library_train_ids(str(library))
+
+
 def test_a_missing_hull_file_is_named_before_training_writes(tmp_path):
     import json
 

@@ -146,16 +146,34 @@ def convex_mesh_problem(path: Path) -> str | None:
     return None
 
 
+# The shape each array file of an object must have (None: any length), and what it holds.
+ARRAY_SHAPES = {"cloud": ((None, 6), "points and outward normals"),
+                "stable_poses": ((None, 7), "poses [p, q_wxyz]"),
+                "bbox_corners": ((8, 3), "box corners"), "unit_inertia": ((3, 3), "inertia")}
+
+
 def _load_array(library: Path, obj: LibraryObject, key: str) -> np.ndarray:
     path = library_file(library, obj, key, getattr(obj, key))
     try:
-        return np.load(path, allow_pickle=False)
+        array = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise MissingInputError(f"object {obj.id!r} of {manifest_path(library)}: "
                                 f"{key} file not found: {path}") from None
     except (OSError, ValueError, EOFError) as e:
         raise InputError(f"object {obj.id!r} of {manifest_path(library)}: cannot read "
                          f"{key} file {path} ({e})") from None
+    # A damaged or hand-made file: named here in one line, not deep in the scene's checks.
+    shape, what = ARRAY_SHAPES.get(key, (None, ""))
+    if shape is not None:
+        wanted = "(" + ", ".join("N" if n is None else str(n) for n in shape) + ")"
+        if array.ndim != len(shape) or any(n is not None and n != m
+                                           for n, m in zip(shape, array.shape)):
+            raise InputError(f"{path}: the {key} of object {obj.id!r} must be a {wanted} array of "
+                             f"{what}, got shape {array.shape}")
+        if not np.issubdtype(array.dtype, np.number) or not np.all(np.isfinite(array)):
+            raise InputError(f"{path}: the {key} of object {obj.id!r} holds values that are not "
+                             "finite numbers (NaN or infinite)")
+    return array
 
 
 # Wall times measured while building (per object and in all), kept out of manifest.json: they

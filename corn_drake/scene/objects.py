@@ -43,7 +43,9 @@ class ObjectSpec:
             if not Path(p).is_file():
                 raise MissingInputError(f"object {self.name}: mesh file not found: {p}")
         if self.cloud.ndim != 2 or self.cloud.shape[1] != 6 or not np.isfinite(self.cloud).all():
-            raise ValueError(f"object {self.name}: cloud must be finite (N, 6), got {self.cloud.shape}")
+            raise ValueError(f"object {self.name}: cloud must be an (N, 6) array of finite "
+                             f"numbers, got shape {self.cloud.shape}"
+                             + ("" if np.isfinite(self.cloud).all() else " holding NaN or inf"))
         # Empty is allowed (an object whose stable poses are being computed); envs need K > 0.
         if self.stable_poses.ndim != 2 or self.stable_poses.shape[1] != 7:
             raise ValueError(f"object {self.name}: stable_poses must be (K, 7)")
