@@ -252,6 +252,8 @@ ROWS += [
     _row("train --policy primitive --set replay_capacity=1000000000000 --out {root}/out/p",
          "replay_capacity"),
     _row("train --envs-per-worker 100000 --out {root}/out/t", "envs_per_worker"),
+    _row(f"train --policy primitive --init-from {REPO}/models/weights/push_corn --steps 600 "
+         "--out {root}/out/p", "--init-from", "a dense PPO teacher run"),
 ]
 # The expert's labels and the chooser fitted to them (issue 61).
 ROWS += [

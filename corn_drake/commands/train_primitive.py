@@ -76,8 +76,13 @@ def checked_config(cfg):
     if cfg.init_from:
         from corn_drake.run_folders.config_file import run_kind
 
-        if run_kind(cfg.init_from) != "primitive":
-            raise InputError(f"--init-from {cfg.init_from}: not a `train --policy primitive` run")
+        held = run_kind(cfg.init_from)
+        if held != "primitive":
+            from corn_drake.run_folders.resumable import KIND_WORDS
+
+            raise InputError(f"--init-from {cfg.init_from}: {KIND_WORDS.get(held, held)}; a "
+                             "primitive run starts only from a primitive run (`train --policy "
+                             "primitive`)")
     if not cfg.encoder:
         raise InputError("--policy primitive needs --encoder FILE, the contact-pretrained CORN "
                          "encoder it reads (`corn-drake pretrain --model corn` writes "
