@@ -83,3 +83,18 @@ def test_an_evaluation_claims_its_range_and_refuses_another(gate_a, tmp_path):
     fresh = tmp_path / "new.rows.jsonl"
     claim_range(fresh, settings, range(7, 9), [])
     assert json.loads(fresh.read_text())["requested"] == [7, 9]
+
+
+def test_a_merge_does_not_replace_another_runs_report(gate_a, tmp_path, capsys):
+    settings, rows = gate_a
+    a = _part(tmp_path / "a.rows.jsonl", settings, (0, 2), rows[:2])
+    theirs = tmp_path / "theirs.json"
+    theirs.write_text(json.dumps({"run": "models/weights/push_primitive", "success_rate": 0.8,
+                                  "episodes": []}))
+    assert main(["merge-reports", str(a), "--report", str(theirs)]) == 2
+    assert "push_primitive" in capsys.readouterr().err
+    assert json.loads(theirs.read_text())["success_rate"] == 0.8  # left as it was
+    assert main(["merge-reports", str(a), "--report", str(theirs), "--overwrite"]) == 0
+    assert json.loads(theirs.read_text())["run"] == "planner"
+    # A merged report is the merge's own: merging again rewrites it.
+    assert main(["merge-reports", str(a), "--report", str(theirs)]) == 0

@@ -24,6 +24,9 @@ def add_arguments(parser):
                              "planner --episodes-from ...`)")
     parser.add_argument("--report", required=True, type=Path,
                         help="the merged report (its rows file is written beside it)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace whatever --report holds (default: a new path, or a "
+                             "planner report, which a merge rewrites)")
 
 
 def run(args) -> int:
@@ -36,6 +39,10 @@ def run(args) -> int:
     inputs = {q for p in args.parts for q in (p, labels_path_of(p))}
     if {p.resolve() for p in outputs} & {p.resolve() for p in inputs}:
         raise InputError(f"--report {args.report}: would overwrite one of its parts")
+    from corn_drake.storage.output_owners import check_report_owner
+
+    # Another run's report at --report is not the merge's to replace (issue 63, ownership).
+    check_report_owner(args.report, "planner", args.overwrite)
     notes: list[str] = []
     report = merge_reports(args.parts, args.report, notes)
     for note in notes:
