@@ -45,6 +45,9 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=seed_int, default=1000,
                         help="as evaluate's --seed: each object's first episode of that evaluation")
     parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace what --out holds (default: a new or empty folder, or a "
+                             "gallery of the same --run, whose old pictures are replaced)")
     parser.add_argument("--animate", action="store_true",
                         help="also write each episode as a looping GIF, OUT/<id>.gif")
     parser.add_argument("--frames", type=int, default=0,
@@ -104,6 +107,9 @@ def run(args) -> int:
     unknown = [i for i in ids if i not in known]
     if unknown:
         raise InputError(f"--ids {','.join(unknown)}: not in library {args.objects}")
+    from corn_drake.storage.output_owners import check_gallery_owner
+
+    earlier = check_gallery_owner(out, str(args.run), args.overwrite)
     ensure_writable(out, "--out")  # after every check: a refused command writes nothing
     entries = []
     for object_id in ids:
@@ -131,4 +137,9 @@ def run(args) -> int:
     write_json(out / "gallery.json", {"run": str(args.run), "policy": cfg.policy,
                                       "task": cfg.env.task.name, "objects": args.objects,
                                       "painted": painted, "episodes": entries})
+    # The earlier gallery's pictures this one did not rewrite (another object, a GIF not asked
+    # for now) go: the folder shows one gallery.
+    kept = {name for e in entries for name in (e["image"], e.get("animation")) if name}
+    for name in set(earlier) - kept:
+        (out / Path(name).name).unlink(missing_ok=True)
     return 0

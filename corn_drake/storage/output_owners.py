@@ -75,3 +75,31 @@ def check_new_file(path: Path | None, overwrite: bool, flag: str = "--out") -> N
     what = "a folder" if path.is_dir() else f"a file of {path.stat().st_size} bytes"
     raise InputError(f"{flag} {path}: already holds {what}; give a new path, or --overwrite to "
                      "replace it")
+
+
+def check_gallery_owner(out: Path, run: str, overwrite: bool, flag: str = "--out") -> list[str]:
+    """Refuses gallery folder `out` unless it is new or empty, or holds a gallery of `run`
+    (gallery.json), or `overwrite` says to replace what is there; returns the files the
+    gallery there lists (a new gallery of the same run removes those it does not rewrite, so no
+    picture of an earlier call is left beside this one's)."""
+    if not out.exists():
+        return []
+    if not out.is_dir():
+        raise InputError(f"{flag} {out}: is a file; give a folder path")
+    entries = list(out.iterdir())
+    listed: list[str] = []
+    index = out / "gallery.json"
+    owner = None
+    if index.is_file():
+        try:
+            data = json.loads(index.read_text())
+            owner = data.get("run")
+            listed = [name for e in data.get("episodes", [])
+                      for name in (e.get("image"), e.get("animation")) if name]
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+            owner = None
+    if not entries or overwrite or owner == run:
+        return listed
+    what = f"the gallery of --run {owner}" if owner else f"{len(entries)} files of something else"
+    raise InputError(f"{flag} {out}: holds {what}; give a new folder, or --overwrite to "
+                     f"replace it with the gallery of {run}")
