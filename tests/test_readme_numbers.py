@@ -96,6 +96,36 @@ def test_readme_results_table_quotes_its_reports():
     assert tasks == {"push", "push_turn", "full6d"}
 
 
+def test_readme_results_table_quotes_the_at_rest_figure_of_the_same_policy():
+    """Each row's at-rest cell: its linked report's success under the at-rest rule, the same
+    policy and task as the row's report, 200 episodes; or 0.000 where the row's report has no
+    success at all (nothing to hold still)."""
+    section = _section((ROOT / "README.md").read_text(), "## Results")
+    (table,) = [t for t in _tables(section) if "unseen success" in t[0]]
+    header = table[0]
+    at_rest, report = header.index("at rest"), header.index("report")
+    for row in table[1:]:
+        (quoted,) = NUMBER.findall(row[at_rest])
+        (main_target,) = LINK.findall(row[report])
+        main = json.loads((ROOT / main_target).read_text())
+        links = LINK.findall(row[at_rest])
+        if not links:
+            assert quoted == "0.000" and main["success_rate"] == 0, row
+            continue
+        (target,) = links
+        rested = json.loads((ROOT / target).read_text())
+        assert quoted == f"{rested['success_rate']:.3f}", (target, quoted)
+        assert len(rested["episodes"]) == 200 and rested["task"] == main["task"], target
+        # The same policy: the same run, or the shipped folder whose card quotes the row's report.
+        card = ROOT / rested["run"] / "card.json"
+        shipped_from = json.loads(card.read_text()) if card.is_file() else {}
+        assert rested["run"] == main["run"] or shipped_from.get("report") == main_target or \
+            shipped_from.get("source_run") == main["run"], target
+        changed = {o["key"]: o["new"] for o in rested.get("overrides", [])}
+        assert changed.get("primitive.success_at_rest") is True, target
+        assert rested["success_rate"] <= main["success_rate"] + 0.05, target
+
+
 def _results_page_rows():
     """(row, [report paths], success cell, interval cell) of docs/results/README.md's task
     tables: the rows naming exactly the reports their figures come from (a brace pattern such
