@@ -256,6 +256,18 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     assert entry["animation_steps"] == [0, first["steps"] // 2, first["steps"]]
     with Image.open(gallery / entry["animation"]) as gif:
         assert (gif.format, gif.n_frames, gif.size) == ("GIF", 3, (64, 48))
+    # A gallery of the same run again, without --animate: its earlier GIF goes, the folder
+    # shows one gallery; another run's gallery there is refused (--overwrite replaces it).
+    assert main(["gallery", "--run", str(out), "--objects", str(library), "--ids",
+                 first["object"], "--out", str(gallery)]) == 0
+    assert not (gallery / entry["animation"]).exists() and (gallery / entry["image"]).exists()
+    data["run"] = "runs/someone_elses"
+    (gallery / "gallery.json").write_text(json.dumps(data))
+    argv = ["gallery", "--run", str(out), "--objects", str(library), "--ids", first["object"],
+            "--out", str(gallery)]
+    assert main(argv) == 2
+    assert json.loads((gallery / "gallery.json").read_text())["run"] == "runs/someone_elses"
+    assert main([*argv, "--overwrite"]) == 0
 
 
 # An outcome model file's learning curve (rl/primitive/outcome/model.fit_network's rows).
@@ -402,15 +414,3 @@ def test_init_from_starts_with_the_source_runs_actor_and_critic(tmp_path, capsys
     capsys.readouterr()
     assert _train(tmp_path / "bad", 8, "--init-from", str(tmp_path / "nothing")) == 2
     one_error_line(capsys, "nothing")
-    # A gallery of the same run again, without --animate: its earlier GIF goes, the folder
-    # shows one gallery; another run's gallery there is refused (--overwrite replaces it).
-    assert main(["gallery", "--run", str(out), "--objects", str(library), "--ids",
-                 first["object"], "--out", str(gallery)]) == 0
-    assert not (gallery / entry["animation"]).exists() and (gallery / entry["image"]).exists()
-    data["run"] = "runs/someone_elses"
-    (gallery / "gallery.json").write_text(json.dumps(data))
-    argv = ["gallery", "--run", str(out), "--objects", str(library), "--ids", first["object"],
-            "--out", str(gallery)]
-    assert main(argv) == 2
-    assert json.loads((gallery / "gallery.json").read_text())["run"] == "runs/someone_elses"
-    assert main([*argv, "--overwrite"]) == 0

@@ -40,7 +40,7 @@ def add_arguments(parser):
     parser.add_argument("--task", default="full6d", help="the task (as evaluate --task)")
     parser.add_argument("--set", action="append", default=[], dest="set", metavar="KEY=VALUE",
                         help="env.* / primitive.* / planner.* setting (as evaluate --run "
-                             "planner's)")
+                             "planner's; default: none, the expert's own settings)")
     parser.add_argument("--learner", default=None,
                         help="a primitive run whose choice is executed where the coin says "
                              "so (default: none, the expert acts everywhere)")

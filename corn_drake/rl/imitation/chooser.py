@@ -17,7 +17,7 @@ import torch
 
 from corn_drake.rl.imitation.features import candidate_features
 from corn_drake.rl.imitation.value_model import choose_index
-from corn_drake.rl.primitive.outcome.chooser import candidates_of
+from corn_drake.rl.primitive.outcome.chooser import candidates_of, choice_of
 
 BANK_SEED = 1  # one fixed bank: the same observation gets the same choice
 
@@ -48,13 +48,4 @@ class ValueChooser:
         with torch.no_grad():
             out = self.model(candidate_features(c, predicted, self.tokens)).numpy()
         best = choose_index(out[:, 0], out[:, 1], self.beam)
-        location, point, motion = rows[best]
-        per_location = np.full(len(usable), -np.inf)
-        motions = np.zeros((len(usable), 3))
-        for (loc, _, m), score in zip(rows, out[:, 1]):
-            if score > per_location[loc]:
-                per_location[loc], motions[loc] = score, m
-        shown = np.where(np.isfinite(per_location), per_location,
-                         per_location[np.isfinite(per_location)].min())
-        return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
-                "scores": shown, "usable": usable, "candidates": points, "motions": motions}
+        return choice_of(rows, out[:, 1], best, usable, points)

@@ -27,6 +27,7 @@ from corn_drake.errors import InputError
 
 CACHE_VERSION = 2  # bump when what a row or state holds changes (2: reached states)
 LABELS_SUFFIX = ".labels.jsonl"
+KEY_CHARS = 20  # of a labels file's sha256, naming its cached arrays
 
 
 def label_files(paths: list[Path]) -> list[Path]:
@@ -54,7 +55,7 @@ def _sha256(path: Path) -> str:
 def file_arrays(path: Path, library: Path, cache: Path | None, progress: bool = False) -> dict:
     """The arrays of labels file `path` (its objects read from `library`), from `cache` when
     there, else replayed and cached."""
-    key = f"{_sha256(path)[:20]}_v{CACHE_VERSION}.npz"
+    key = f"{_sha256(path)[:KEY_CHARS]}_v{CACHE_VERSION}.npz"
     if cache is not None and (cache / key).is_file():
         with np.load(cache / key) as stored:
             return dict(stored)

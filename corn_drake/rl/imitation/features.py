@@ -19,7 +19,9 @@ import torch
 from corn_drake.rl.primitive.outcome.model import (PLANAR, SCALE, Candidates,
                                                    box_contact_features, push_frames, turn)
 
-BASE_FEATURES = 18 + 24 + 24 + 2  # box_contact (13 + 5 physics), keypoints, to goal, 2 scalars
+BOX_CONTACT_COLUMNS = 18  # box_contact_features: 13 object-relative numbers and 5 of physics
+KEYPOINT_COLUMNS = 24  # the 8 box keypoints' xyz
+BASE_FEATURES = BOX_CONTACT_COLUMNS + 2 * KEYPOINT_COLUMNS + 2  # + now, to goal, 2 scalars
 PRIOR_COLUMN = BASE_FEATURES - 1  # the outcome model's predicted reward
 
 

@@ -65,17 +65,25 @@ class OutcomeChooser:
         candidates, options, usable, points = self.candidates(agent, obs)
         scores = self.scores(candidates, task, agent.primitive_config.progress_reward)
         best = int(np.argmax(scores))
-        location, point, motion = options[best]
-        per_location = np.full(len(usable), -np.inf)
-        motions = np.zeros((len(usable), 3))
-        for (loc, _, m), score in zip(options, scores):
-            if score > per_location[loc]:
-                per_location[loc], motions[loc] = score, m
-        # Locations never scored (ruled out) show as the lowest score, as the critic's choice.
-        shown = np.where(np.isfinite(per_location), per_location,
-                         per_location[np.isfinite(per_location)].min())
-        return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
-                "scores": shown, "usable": usable, "candidates": points, "motions": motions}
+        return choice_of(options, scores, best, usable, points)
+
+
+def choice_of(rows: list, scores: np.ndarray, best: int, usable: np.ndarray,
+              points: np.ndarray) -> dict:
+    """PrimitiveAgent.choose's answer when candidate `best` of `rows` [(location, cloud point,
+    motion)] is chosen: each location's score is its best candidate's (`scores`), its motion
+    that candidate's."""
+    location, point, motion = rows[best]
+    per_location = np.full(len(usable), -np.inf)
+    motions = np.zeros((len(usable), 3))
+    for (loc, _, m), score in zip(rows, scores):
+        if score > per_location[loc]:
+            per_location[loc], motions[loc] = score, m
+    # Locations never scored (ruled out) show as the lowest score, as the critic's choice.
+    shown = np.where(np.isfinite(per_location), per_location,
+                     per_location[np.isfinite(per_location)].min())
+    return {"point": point, "motion": np.asarray(motion, np.float64), "location": location,
+            "scores": shown, "usable": usable, "candidates": points, "motions": motions}
 
 
 def candidates_of(agent, obs: dict, features: dict, rows: list) -> Candidates:
