@@ -174,6 +174,17 @@ def test_label_refuses_bad_settings_in_one_line(library, tmp_path, capsys, extra
     assert not list(tmp_path.iterdir())
 
 
+def test_label_does_not_replace_another_runs_report(library, tmp_path, capsys):
+    from corn_drake.cli import main
+
+    theirs = tmp_path / "eval_push.json"
+    theirs.write_text(json.dumps({"run": "models/weights/push_primitive", "success_rate": 0.84,
+                                  "episodes": []}))
+    assert main(["label", "--objects", str(library), "--out", str(tmp_path / "eval_push")]) == 2
+    assert "push_primitive" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval_push.json"]
+
+
 def test_label_refuses_a_library_without_train_objects(tmp_path, capsys):
     from corn_drake.cli import main
     from tests.fixtures import write_loadable_library

@@ -102,6 +102,10 @@ def run(args) -> int:
     objects = [(i, load_object_spec(args.objects, i)) for i in ids]
     report_path = args.out.with_name(args.out.name + ".json")
     ensure_writable(report_path.parent, "--out")
+    from corn_drake.storage.output_owners import check_report_owner
+
+    # OUT.json of another run's evaluation is not this labelling's to replace.
+    check_report_owner(report_path, "planner", False, flag="--out")
     print(f"label {len(ids)} train objects of {args.objects} on task {run_cfg.env.task.name}, "
           f"episodes {args.episodes_from}..{args.episodes - 1}"
           + (f", the learner {args.learner} acting with probability {1 - labeller.beta:g}"
