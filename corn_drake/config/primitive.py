@@ -42,7 +42,8 @@ class PrimitiveConfig:
               "min_tool_height": "[0, 0.2]", "push_distance": "(0, 0.5]", "push_steps": "[1, 100]",
               "retreat_height": "[0, 0.5]", "retreat_steps": "[1, 100]",
               "reach_tolerance": "(0, 0.1]", "turn_tolerance": "(0, 3.1416]",
-              "approach_steps": "[1, 1000]", "max_primitives": "[1, 1000]", "stiffness": "[-1, 1]", "damping": "[-1, 1]",
+              "approach_steps": "[1, 1000]", "max_primitives": "[1, 1000]",
+              "stiffness": "[-1, 1]", "damping": "[-1, 1]",
               "progress_reward": ">= 0", "push_height": ">= 0", "finger_tilt_deg": "[0, 60]",
               "rest_linear_speed": "> 0", "rest_angular_speed": "> 0",
               "settle_steps": ">= 0", "settle_motion": "> 0"}

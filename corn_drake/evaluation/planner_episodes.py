@@ -9,10 +9,10 @@ the episodes already there, and `--episodes-from A --episodes N` plays only k in
 200 episodes can be spread over processes writing different reports (merge-reports joins
 them), or over Ray workers (planner_workers.py). The report is rewritten after every episode.
 
-Each row is planner_play.play's. What every decision's search found of each root candidate (its reward and,
-in the beam, its value: search.label_of) goes to REPORT.labels.jsonl, one line per episode
-(its first line: the settings and the columns), written before the episode's row: the labels a
-learned chooser is fitted to, kept out of the report.
+Each row is planner_play.play's. What every decision's search found of each root candidate
+(its reward and, in the beam, its value: search.label_of) goes to REPORT.labels.jsonl, one line
+per episode (its first line: the settings and the columns), written before the episode's row:
+the labels a learned chooser is fitted to, kept out of the report.
 """
 
 from __future__ import annotations

@@ -39,7 +39,8 @@ class PlannerEpisodeWorker(WorkerBase):
 
         if object_id != self.object_id:  # one env alive per worker
             spec = spec if spec is not None else load_object_spec(self.library, object_id)
-            self.env, self.object_id = PrimitiveEnv(self.cfg, self.policy.primitive, spec), object_id
+            self.env = PrimitiveEnv(self.cfg, self.policy.primitive, spec)
+            self.object_id = object_id
         return {"episode": k, "object": object_id, "seed": seed,
                 **play(self.env, self.planner, seed, self.labeller)}
 

@@ -11,8 +11,9 @@ sha256, so a second fit reads them at once.
 Arrays (one row per candidate): "x" (R, F) the features with the token last, "reward" (R,), "value"
 (R,) NaN outside the beam, "state" (R,) the state's index; per state (a searched state, then the
 states its beam's candidates reached, search.child_labels): "chosen" (S,) the expert's choice as
-a row index (-1 at a reached state, where the expert chose nothing), "object" (S,), "drift" (S,) |replayed - recorded reward| of the executed
-primitive where a state was replayed (0 where it was rebuilt from its pose).
+a row index (-1 at a reached state, where the expert chose nothing), "object" (S,), "drift"
+(S,) |replayed - recorded reward| of the executed primitive where a state was replayed (0 where
+it was rebuilt from its pose).
 """
 
 from __future__ import annotations
