@@ -68,6 +68,35 @@ def test_the_fit_learns_a_ranking_it_can_and_is_the_same_for_the_same_seed():
                                                  again.state_dict().values()))
 
 
+def test_the_early_stop_keeps_the_weights_that_pick_best_on_held_out_objects():
+    """Held-out objects whose best candidates follow another rule than the fitted ones': the fit
+    keeps the weights before its first update (the prior), which pick better there than what it
+    learned; held-out objects that follow the same rule: it keeps learned weights."""
+    from corn_drake.rl.imitation.fit import select_states, split_objects
+
+    torch.set_num_threads(1)
+    train = _synthetic(300, 0)
+    other = _synthetic(100, 1)
+    other["reward"] = -other["reward"]  # another rule: the fitted one's best is their worst
+    other["x"][:, PRIOR_COLUMN] = other["reward"]  # and the prior knows their rule
+    other["chosen"] = np.array([np.flatnonzero(other["state"] == s)[
+        np.argmax(other["reward"][other["state"] == s])] for s in range(100)])
+    model = fit_value(train, False, 600, seed=0, held=other, beam=1)
+    assert model.kept_update == 0
+    assert agreement(model, other, False, 1)["agreement"] == 1.0  # the prior's picks
+    alike = _synthetic(100, 2)
+    model = fit_value(train, False, 600, seed=0, held=alike, beam=1)
+    assert model.kept_update > 0 and agreement(model, alike, False, 1)["agreement"] > 0.6
+    # The split holds whole objects out: no object's states on both sides.
+    data = dict(train, object=np.array([f"o{s % 5}" for s in range(300)]))
+    kept, held = split_objects(data, 0.2, seed=0)
+    assert len(set(held["object"])) == 1 and not set(held["object"]) & set(kept["object"])
+    assert len(kept["chosen"]) + len(held["chosen"]) == 300
+    assert np.all(kept["state"][kept["chosen"]] == np.arange(len(kept["chosen"])))
+    again = select_states(data, np.arange(300))
+    assert np.array_equal(again["chosen"], data["chosen"])
+
+
 def test_an_untrained_network_chooses_as_its_prior():
     x = torch.zeros(4, BASE_FEATURES)
     x[:, PRIOR_COLUMN] = torch.tensor([0.1, 0.7, 0.3, 0.2])
@@ -137,7 +166,7 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     assert "validation: picks the expert's candidate" in printed
     searched = sum(len(r["decisions"]) for r in records)
     assert f"states ({searched} searched" in printed
-    assert f"fitted to {searched + len(reached)} states" in printed
+    assert f"labels of {searched + len(reached)} states" in printed
     assert any((tmp_path / "cache").glob("*.npz"))
     assert main(["fit-chooser", "--labels", str(out.parent), "--objects", str(library),
                  "--out-run", str(run), "--no-progress"]) == 2  # never replaces a folder

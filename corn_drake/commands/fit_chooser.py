@@ -37,6 +37,10 @@ def add_arguments(parser):
     parser.add_argument("--updates", type=positive_int, default=4000,
                         help="Adam updates of 256 candidates each")
     parser.add_argument("--seed", type=nonnegative_int, default=0, help="the fit's seed")
+    parser.add_argument("--held-out", type=float, default=0.2,
+                        help="share of the labels' objects held out of the fit to stop it: the "
+                             "weights kept are those that picked best there (0: every object "
+                             "fitted, the last weights kept)")
     parser.add_argument("--beam", type=positive_int, default=4,
                         help="candidates of most predicted reward the value chooses among "
                              "(the expert's beam)")
@@ -69,7 +73,7 @@ def run(args) -> int:
     import torch
 
     from corn_drake.rl.imitation.dataset import label_files, load_label_arrays
-    from corn_drake.rl.imitation.fit import agreement, fit_value
+    from corn_drake.rl.imitation.fit import agreement, fit_value, split_objects
     from corn_drake.rl.imitation.value_model import MODEL_FILE, save_value_model
     from corn_drake.rl.planner.sources import policy_run_folder
     from corn_drake.rl.primitive.outcome.model import MODEL_FILE as OUTCOME_FILE
@@ -83,8 +87,13 @@ def run(args) -> int:
     run_folder = policy_run_folder(proposer)
     torch.set_num_threads(1)  # as every fit: another thread count sums in another order
     data = load_label_arrays(files, args.objects, args.cache, progress=not args.no_progress)
+    if not 0.0 <= args.held_out < 1.0:
+        raise InputError(f"--held-out {args.held_out}: a share of the objects, in [0, 1)")
     history: list = []
-    model = fit_value(data, args.tokens, args.updates, args.seed, history=history)
+    fitted, held = (split_objects(data, args.held_out, args.seed) if args.held_out > 0
+                    else (data, None))
+    model = fit_value(fitted, args.tokens, args.updates, args.seed, history=history, held=held,
+                      beam=args.beam)
     facts = {"tokens": args.tokens, "beam": args.beam, "bank": args.bank,
              "updates": args.updates, "seed": args.seed, "proposer": proposer,
              "states": int(len(data["chosen"])),
@@ -92,7 +101,10 @@ def run(args) -> int:
              "rows": int(len(data["reward"])),
              "objects": int(len(set(data["object"]))),
              "labels": {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
-             "train_agreement": agreement(model, data, args.tokens, args.beam),
+             "held_out": args.held_out,
+             "held_out_objects": sorted(set(held["object"])) if held is not None else [],
+             "kept_update": getattr(model, "kept_update", args.updates),
+             "train_agreement": agreement(model, fitted, args.tokens, args.beam),
              "fit_history": history}
     if args.validate:
         held = load_label_arrays(args.validate, args.validate_objects or args.objects,
@@ -106,7 +118,10 @@ def run(args) -> int:
     write_outcome_run(run_folder, cfg, outcome.model, outcome.facts["tokens"], kept,
                       args.out_run,
                       more={MODEL_FILE: lambda path: save_value_model(path, model, **facts)})
-    print(f"fitted to {facts['states']} states ({facts['searched_states']} searched, the rest "
+    if held is not None:
+        print(f"held out {len(facts['held_out_objects'])} of {facts['objects']} objects; kept the "
+              f"weights of update {facts['kept_update']} of {args.updates} (0: the prior alone)")
+    print(f"labels of {facts['states']} states ({facts['searched_states']} searched, the rest "
           f"reached by the search's beam; {facts['rows']} candidates, {facts['objects']} "
           f"objects); wrote {args.out_run}")
     for name in ("train_agreement", "validation"):
