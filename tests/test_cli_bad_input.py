@@ -268,6 +268,8 @@ ROWS += [
          "--labels {root}/nosuch"),
     _row("fit-chooser --labels {root}/lib --objects {root}/lib --out-run {root}/out/f",
          "--labels {root}/lib", "labels.jsonl"),
+    _row("fit-chooser --labels {root}/lib --objects {root}/lib --held-out 1 --out-run "
+         "{root}/out/f", "--held-out 1"),
     _row("fit-chooser --labels {root}/lib --objects {root}/lib --out-run {root}/out",
          "--out-run {root}/out"),
 ]

@@ -82,16 +82,18 @@ def run(args) -> int:
 
     if args.out_run.exists():
         raise InputError(f"--out-run {args.out_run}: exists; give a new folder")
+    if not 0.0 <= args.held_out < 1.0:
+        raise InputError(f"--held-out {args.held_out}: a share of the objects, in [0, 1)")
     files = label_files(args.labels)
     proposer, task = _proposer(files)
     run_folder = policy_run_folder(proposer)
     torch.set_num_threads(1)  # as every fit: another thread count sums in another order
     data = load_label_arrays(files, args.objects, args.cache, progress=not args.no_progress)
-    if not 0.0 <= args.held_out < 1.0:
-        raise InputError(f"--held-out {args.held_out}: a share of the objects, in [0, 1)")
     history: list = []
-    fitted, held = (split_objects(data, args.held_out, args.seed) if args.held_out > 0
-                    else (data, None))
+    stop = args.held_out > 0 and len(set(data["object"])) >= 2
+    if args.held_out > 0 and not stop:
+        print("one object's labels: nothing to hold out, the fit runs all its updates")
+    fitted, held = split_objects(data, args.held_out, args.seed) if stop else (data, None)
     model = fit_value(fitted, args.tokens, args.updates, args.seed, history=history, held=held,
                       beam=args.beam)
     facts = {"tokens": args.tokens, "beam": args.beam, "bank": args.bank,
@@ -107,10 +109,10 @@ def run(args) -> int:
              "train_agreement": agreement(model, fitted, args.tokens, args.beam),
              "fit_history": history}
     if args.validate:
-        held = load_label_arrays(args.validate, args.validate_objects or args.objects,
-                                 args.cache, progress=not args.no_progress)
+        validation = load_label_arrays(args.validate, args.validate_objects or args.objects,
+                                       args.cache, progress=not args.no_progress)
         facts["validation"] = {"labels": [str(p) for p in label_files(args.validate)],
-                               **agreement(model, held, args.tokens, args.beam)}
+                               **agreement(model, validation, args.tokens, args.beam)}
     cfg = dataclasses.replace(outcome_run_config(run_folder, task, []), chooser="expert_value")
     # The proposing run's outcome model goes along as it is (its facts and curve with it).
     outcome = load_outcome_parts(run_folder / OUTCOME_FILE)
