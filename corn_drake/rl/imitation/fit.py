@@ -114,10 +114,16 @@ def picks(model: ValueNet, data: dict, tokens: bool, beam: int) -> np.ndarray:
     candidates."""
     with torch.no_grad():
         out = model(inputs(data, tokens)).numpy()
-    rows = np.arange(len(data["state"]))
-    return np.array([rows[data["state"] == s][choose_index(out[data["state"] == s, 0],
-                                                           out[data["state"] == s, 1], beam)]
-                     for s in range(len(data["chosen"]))])
+    return np.array([rows[choose_index(out[rows, 0], out[rows, 1], beam)]
+                     for rows in state_rows(data)])
+
+
+def state_rows(data: dict) -> list[np.ndarray]:
+    """Each state's row indices, found in one pass (a scan of every row per state made the
+    early stop's checks quadratic in the labels)."""
+    order = np.argsort(data["state"], kind="stable")
+    bounds = np.searchsorted(data["state"][order], np.arange(len(data["chosen"]) + 1))
+    return [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def agreement(model: ValueNet, data: dict, tokens: bool, beam: int) -> dict:
@@ -127,8 +133,9 @@ def agreement(model: ValueNet, data: dict, tokens: bool, beam: int) -> dict:
     searched = data["chosen"] >= 0  # the states the expert chose at (not those reached)
     chosen = picks(model, data, tokens, beam)[searched]
     expert = data["chosen"][searched]
-    reward, value, state = data["reward"], data["value"], data["state"]
-    best = np.array([reward[state == s].max() for s in np.flatnonzero(searched)])
+    reward, value = data["reward"], data["value"]
+    rows_of = state_rows(data)
+    best = np.array([reward[rows_of[s]].max() for s in np.flatnonzero(searched)])
     return {"states": int(len(chosen)),
             "agreement": float(np.mean(chosen == expert)),
             "pick_reward": float(np.mean(reward[chosen])),
