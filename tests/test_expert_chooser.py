@@ -149,7 +149,7 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     out = tmp_path / "labels" / "r0"
     assert main(["label", "--objects", str(library), "--episodes", "2", "--no-progress", *TINY,
                  "--out", str(out)]) == 0
-    settings, _, records = read_labels(out.with_name("r0.labels.jsonl"))
+    settings, _, records = read_labels(out.with_name("r0.labels.jsonl.gz"))
     assert settings["library_content_hash"] and "learner" not in settings
     assert {r["object"] for r in records} == set(settings["objects"])  # train objects only
     assert all(len(d["pose"]) == 7 for r in records for d in r["decisions"])
@@ -161,7 +161,7 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     assert main(["fit-chooser", "--labels", str(out.parent), "--objects", str(library),
                  "--out-run", str(run), "--updates", "20", "--tokens", "--no-progress",
                  "--cache", str(tmp_path / "cache"), "--validate",
-                 str(out.with_name("r0.labels.jsonl"))]) == 0
+                 str(out.with_name("r0.labels.jsonl.gz"))]) == 0
     printed = capsys.readouterr().out
     assert "validation: picks the expert's candidate" in printed
     searched = sum(len(r["decisions"]) for r in records)
@@ -180,13 +180,13 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     argv = ["label", "--objects", str(library), "--episodes", "1", "--no-progress", *TINY,
             "--learner", str(run), "--seed", "1", "--out", str(again)]
     assert main(argv) == 0
-    settings, _, records = read_labels(again.with_name("r1.labels.jsonl"))
+    settings, _, records = read_labels(again.with_name("r1.labels.jsonl.gz"))
     assert settings["learner"] == str(run) and settings["beta"] == 0.0
     assert {d["actor"] for d in records[0]["decisions"]} == {"learner"}
     assert all(d["labels"] for d in records[0]["decisions"])
-    before = again.with_name("r1.labels.jsonl").read_text()
+    before = again.with_name("r1.labels.jsonl.gz").read_bytes()
     assert main(argv) == 0
-    assert again.with_name("r1.labels.jsonl").read_text() == before  # resumed: nothing new
+    assert again.with_name("r1.labels.jsonl.gz").read_bytes() == before  # resumed: nothing new
 
 
 @pytest.mark.parametrize("extra, said", [
@@ -255,8 +255,8 @@ def test_label_over_ray_workers_writes_the_same_episodes(library, tmp_path, own_
     argv = ["label", "--objects", str(library), "--episodes", "3", "--no-progress", *TINY]
     assert main([*argv, "--out", str(tmp_path / "one")]) == 0
     assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
-    one = read_labels(tmp_path / "one.labels.jsonl")
-    two = read_labels(tmp_path / "two.labels.jsonl")
+    one = read_labels(tmp_path / "one.labels.jsonl.gz")
+    two = read_labels(tmp_path / "two.labels.jsonl.gz")
     assert one[0] == two[0]  # the same settings: parts of one labelling merge
     key = lambda r: (r["episode"], r["object"], r["seed"])  # noqa: E731
     assert sorted(map(key, one[2])) == sorted(map(key, two[2])) and len(two[2]) == 3

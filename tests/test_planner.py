@@ -17,6 +17,7 @@ from corn_drake.evaluation.planner_play import cloud_distance
 from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
 from corn_drake.rl.envs.branching import Candidate
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+from corn_drake.storage.gz_lines import read_lines
 from corn_drake.rl.planner.kinds import goal_errors, propose
 from corn_drake.rl.planner.search import Planner, budget
 from corn_drake.systems.primitive_executor import reachable_from_above
@@ -346,7 +347,7 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
     assert first["cpu_seconds_per_decision"] > 0 and first["decisions_per_core_hour"] > 0
     # The labels: a header naming the columns, then one line per episode, a table per decision
     # whose rows are the root candidates (the chosen one among them).
-    labels = report.with_name("r.labels.jsonl").read_text().splitlines()
+    labels = read_lines(report.with_name("r.labels.jsonl.gz"))[0]
     header, episode = json.loads(labels[0]), json.loads(labels[1])
     assert header["columns"][-2:] == ["reward", "value"] and len(labels) == 2
     assert episode["seed"] == first["episodes"][0]["seed"]
@@ -360,7 +361,7 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
     from corn_drake.config.diagram_files import load_primitive_env_config
     from corn_drake.rl.planner.labels import read_labels, replay
 
-    settings, columns, records = read_labels(report.with_name("r.labels.jsonl"))
+    settings, columns, records = read_labels(report.with_name("r.labels.jsonl.gz"))
     env_cfg = load_primitive_env_config(settings["task"])
     env_cfg.seed = settings["seed"]
     env = PrimitiveEnv(env_cfg, PlannerRunConfig().primitive.__class__(**settings["primitive"]),
@@ -377,6 +378,7 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
 
 
 def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, capsys):
+    import gzip
     import json
 
     from corn_drake.cli import main
@@ -391,14 +393,20 @@ def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, ca
     assert main([*common, "--episodes-from", "1", "--episodes", "2",
                  "--report", str(tmp_path / "b.json")]) == 0
     a, b = tmp_path / "a.rows.jsonl", tmp_path / "b.rows.jsonl"
+    # A part from before the labels were gzipped keeps them plain: it merges the same.
+    plain = tmp_path / "a.labels.jsonl"
+    plain.write_text("\n".join(read_lines(tmp_path / "a.labels.jsonl.gz")[0]) + "\n")
+    (tmp_path / "a.labels.jsonl.gz").unlink()
     # A kill mid-append leaves half a line: the rows before it are whole and still merge.
     with open(b, "a") as f:
         f.write('{"episode": 7, "obj')
     assert main(["merge-reports", str(a), str(b), "--report", str(tmp_path / "all.json")]) == 0
     merged = json.loads((tmp_path / "all.json").read_text())
     # Their labels join too: one line per merged episode after the header.
-    labels = (tmp_path / "all.labels.jsonl").read_text().splitlines()
+    labels = read_lines(tmp_path / "all.labels.jsonl.gz")[0]
     assert [json.loads(line)["episode"] for line in labels[1:]] == [0, 1]
+    plain.with_name("a.labels.jsonl.gz").write_bytes(gzip.compress(plain.read_bytes()))
+    plain.unlink()  # gzipped by hand: one member holding every line reads the same
     parts = [json.loads((tmp_path / n).read_text())["episodes"][0] for n in ("a.json", "b.json")]
     assert merged["episodes"] == parts and merged["complete"] and merged["privileged"]
     assert [r["object"] for r in parts] == [o for o in json.loads(
@@ -416,10 +424,10 @@ def test_split_runs_merge_into_one_report_and_bad_parts_are_refused(tmp_path, ca
     assert not (tmp_path / "x.json").exists()
     # An evaluation into a report whose labels file is another evaluation's is refused before
     # it plays, and the file is left as it was.
-    foreign = (tmp_path / "a.labels.jsonl").read_text()
-    (tmp_path / "c.labels.jsonl").write_text(foreign)
+    foreign = (tmp_path / "a.labels.jsonl.gz").read_bytes()
+    (tmp_path / "c.labels.jsonl.gz").write_bytes(foreign)
     assert main([*common, "--set", "planner.per_kind=2", "--episodes", "1",
                  "--report", str(tmp_path / "c.json")]) == 2
     assert "another evaluation's labels" in capsys.readouterr().err
-    assert (tmp_path / "c.labels.jsonl").read_text() == foreign
+    assert (tmp_path / "c.labels.jsonl.gz").read_bytes() == foreign
     assert not (tmp_path / "c.rows.jsonl").exists()

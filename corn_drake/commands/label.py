@@ -6,9 +6,9 @@ Every state of every episode is searched by the expert (rl/planner/search.py, th
 of each root candidate (its simulated reward; in the beam, its two-step value) is kept. Which
 primitive is then executed is DAgger's mixture: the expert's choice with probability --beta,
 else --learner's (a primitive run, e.g. the last fitted chooser), so later rounds label the
-states the learner itself visits. Written beside OUT: OUT.labels.jsonl (the labels: one line per
-episode, rl/planner/labels.py's format, its header naming the library's content hash, the
-learner and beta), OUT.rows.jsonl and OUT.json (how the acting mixture did, per episode), all
+states the learner itself visits. Written beside OUT: OUT.labels.jsonl.gz (the labels: one
+gzipped line per episode, rl/planner/labels.py's format, its header naming the library's content
+hash, the learner and beta), OUT.rows.jsonl and OUT.json (how the acting mixture did, per episode), all
 resumable: a rerun with the same settings plays only the episodes not yet there. The shipped
 labels live in models/labels/TASK/ (one file per round), where `fit-chooser` reads them.
 
@@ -48,7 +48,7 @@ def add_arguments(parser):
                         help="probability that the expert's choice is executed at a state "
                              "(default: 1 without --learner, 0 with one)")
     parser.add_argument("--out", type=Path, required=True,
-                        help="path of the labels without suffix: OUT.labels.jsonl, "
+                        help="path of the labels without suffix: OUT.labels.jsonl.gz, "
                              "OUT.rows.jsonl and OUT.json are written (e.g. "
                              "models/labels/full6d/round1)")
     parser.add_argument("--workers", type=nonnegative_int, default=0,
@@ -77,6 +77,7 @@ def run(args) -> int:
     from corn_drake.assets.content_hash import library_content_hash
     from corn_drake.assets.library import list_objects, load_object_spec
     from corn_drake.evaluation.planner_episodes import evaluate_planner
+    from corn_drake.rl.planner.labels import LABELS_SUFFIX
     from corn_drake.rl.run_loading import load_any_run
     from corn_drake.storage.atomic_files import ensure_writable
     from corn_drake.storage.file_locks import locked_output
@@ -86,8 +87,8 @@ def run(args) -> int:
                          f"{args.episodes}")
     if args.ray_address and not args.workers:
         raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
-    if args.out.suffix in (".json", ".jsonl"):
-        raise InputError(f"--out {args.out}: give the path without a suffix (OUT.labels.jsonl "
+    if args.out.suffix in (".json", ".jsonl", ".gz"):
+        raise InputError(f"--out {args.out}: give the path without a suffix (OUT.labels.jsonl.gz "
                          "and the others are written beside it)")
     if not (args.objects / "manifest.json").is_file():
         raise InputError(f"--objects {args.objects}: no object library (no manifest.json)")
@@ -122,5 +123,5 @@ def run(args) -> int:
     print(f"{len(report['episodes'])} episodes, {decisions} labelled states "
           f"({report['decisions_per_core_hour'] or 0:.0f} per core-hour); the acting mixture's "
           f"success {report['success_rate']:.2f}; labels "
-          f"{args.out.with_name(args.out.name + '.labels.jsonl')}")
+          f"{args.out.with_name(args.out.name + LABELS_SUFFIX)}")
     return 0

@@ -6,7 +6,7 @@ other processes, sessions or machines, are merged here into the report of all th
 after checking that they share every setting, that every row is the episode its number says
 (its object and seed) within its part's requested range, and that no episode comes twice
 (evaluation/report_merge.py); the episodes asked for and missing are said. Their labels files
-(REPORT.labels.jsonl) join into the merged report's: `corn-drake label`'s parts merge the same
+(REPORT.labels.jsonl.gz) join into the merged report's: `corn-drake label`'s parts merge the same
 way.
 """
 
@@ -33,10 +33,13 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.evaluation.planner_episodes import labels_path_of
     from corn_drake.evaluation.report_merge import merge_reports
+    from corn_drake.rl.planner.labels import LABELS_SUFFIX, plain_path_of
 
+    labels_out = args.report.with_name(args.report.stem + LABELS_SUFFIX)
     outputs = {args.report, args.report.with_name(args.report.stem + ".rows.jsonl"),
-               args.report.with_name(args.report.stem + ".labels.jsonl")}
-    inputs = {q for p in args.parts for q in (p, labels_path_of(p))}
+               labels_out, plain_path_of(labels_out)}
+    inputs = {q for p in args.parts
+              for q in (p, labels_path_of(p), plain_path_of(labels_path_of(p)))}
     if {p.resolve() for p in outputs} & {p.resolve() for p in inputs}:
         raise InputError(f"--report {args.report}: would overwrite one of its parts")
     from corn_drake.storage.output_owners import check_report_owner

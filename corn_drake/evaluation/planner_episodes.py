@@ -10,9 +10,10 @@ the episodes already there, and `--episodes-from A --episodes N` plays only k in
 them), or over Ray workers (planner_workers.py). The report is rewritten after every episode.
 
 Each row is planner_play.play's. What every decision's search found of each root candidate
-(its reward and, in the beam, its value: search.label_of) goes to REPORT.labels.jsonl, one line
-per episode (its first line: the settings and the columns), written before the episode's row:
-the labels a learned chooser is fitted to, kept out of the report.
+(its reward and, in the beam, its value: search.label_of) goes to REPORT.labels.jsonl.gz, one
+line per episode (its first line: the settings and the columns), written before the episode's
+row: the labels a learned chooser is fitted to, kept out of the report. They are gzipped a line
+per member (storage/gz_lines.py: a fifth of the size, still appended a line at a time).
 """
 
 from __future__ import annotations
@@ -87,11 +88,13 @@ def claim_range(rows_path: Path, settings: dict, episodes: range, rows: list[dic
 
 
 def read_labels_by_episode(path: Path, settings: dict) -> dict[int, dict]:
-    """The episode labels of `path` (REPORT.labels.jsonl, rl/planner/labels.read_labels) by
-    episode; {} for no file. A file of another evaluation's labels is refused, as its rows file
-    would be."""
-    from corn_drake.rl.planner.labels import read_labels
+    """The episode labels of `path` (REPORT.labels.jsonl.gz, or the plain REPORT.labels.jsonl
+    an older run wrote; rl/planner/labels.read_labels) by episode; {} for neither. A file of
+    another evaluation's labels is refused, as its rows file would be."""
+    from corn_drake.rl.planner.labels import plain_path_of, read_labels
 
+    if not path.exists():
+        path = plain_path_of(path)
     if not path.exists():
         return {}
     try:
@@ -105,8 +108,10 @@ def read_labels_by_episode(path: Path, settings: dict) -> dict[int, dict]:
 
 
 def labels_path_of(rows_path: Path) -> Path:
-    """REPORT.labels.jsonl beside REPORT.rows.jsonl."""
-    return rows_path.with_name(rows_path.name.replace(".rows.jsonl", ".labels.jsonl"))
+    """REPORT.labels.jsonl.gz beside REPORT.rows.jsonl."""
+    from corn_drake.rl.planner.labels import LABELS_SUFFIX
+
+    return rows_path.with_name(rows_path.name.replace(".rows.jsonl", LABELS_SUFFIX))
 
 
 def settings_of(path: Path) -> dict:
@@ -182,7 +187,9 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     from tqdm import tqdm
 
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+    from corn_drake.rl.planner.labels import gzip_plain_labels
     from corn_drake.rl.planner.search import LABEL_COLUMNS
+    from corn_drake.storage.gz_lines import append_line, cut_after, read_lines
 
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
@@ -197,11 +204,15 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
     labels_path = labels_path_of(rows_path)
     rows = read_rows(rows_path, settings)
-    # Another evaluation's labels: refused before any episode.
+    # Another evaluation's labels: refused before any episode (and before any file changes).
     read_labels_by_episode(labels_path, settings)
+    gzip_plain_labels(labels_path)
     claim_range(rows_path, settings, episodes, rows)
+    _, whole = read_lines(labels_path) if labels_path.exists() else ([], None)
+    if whole is not None:  # a member a kill cut short: its episode is played again
+        cut_after(labels_path, whole)
     if not labels_path.exists():
-        _append(labels_path, {"settings": settings, "columns": LABEL_COLUMNS})
+        append_line(labels_path, {"settings": settings, "columns": LABEL_COLUMNS})
     done = {r["episode"] for r in rows}
     bar = tqdm(total=len(episodes), initial=len(done), desc="episodes", unit="episode",
                disable=not progress)
@@ -214,8 +225,8 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
     def finished(row: dict) -> None:
         # The labels first: a kill between the two lines replays the episode, and a reader
         # keeps an episode's last labels line.
-        _append(labels_path, {"episode": row["episode"], "object": row["object"],
-                              "seed": row["seed"], "decisions": row.pop("labels")})
+        append_line(labels_path, {"episode": row["episode"], "object": row["object"],
+                                  "seed": row["seed"], "decisions": row.pop("labels")})
         _append(rows_path, row)
         rows.append(row)
         write_json(report_path, report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task,

@@ -100,11 +100,15 @@ def merge_reports(parts: list[Path], out: Path, notes: list | None = None) -> di
     write_text(out.with_name(out.stem + ".rows.jsonl"),
                "".join(f"{json.dumps(r)}\n" for r in [header, *rows]))
     if labels:
+        from corn_drake.rl.planner.labels import LABELS_SUFFIX, plain_path_of
         from corn_drake.rl.planner.search import LABEL_COLUMNS
+        from corn_drake.storage.gz_lines import write_lines
 
         kept = [labels[r["episode"]] for r in rows if r["episode"] in labels]
-        write_text(out.with_name(out.stem + ".labels.jsonl"), "".join(
-            f"{json.dumps(r)}\n" for r in [{"settings": settings, "columns": LABEL_COLUMNS},
-                                           *kept]))
+        labels_out = out.with_name(out.stem + LABELS_SUFFIX)
+        write_lines(labels_out, [json.dumps(r) for r in
+                                 [{"settings": settings, "columns": LABEL_COLUMNS}, *kept]])
+        # An earlier merge's plain labels here are this merge's own older output.
+        plain_path_of(labels_out).unlink(missing_ok=True)
     write_json(out, report)
     return report

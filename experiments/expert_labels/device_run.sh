@@ -17,7 +17,7 @@
 #   corn-drake merge-reports runs/device_parts/gate_*.rows.jsonl <the committed gate B rows> \
 #     --report docs/results/planner/eval_full6d_planner.json
 #   corn-drake merge-reports runs/device_parts/label_*.rows.jsonl \
-#     --report models/labels/full6d/round<N>.json        # its .labels.jsonl beside it
+#     --report models/labels/full6d/round<N>.json        # its .labels.jsonl.gz beside it
 # Settings: END (s from the start, default 560), GATE (processes on gate B, default 8),
 # GATE_FROM/GATE_TO (its episode range, default 40..200), LABEL_SEED (default 1), LEARNER
 # (a run folder in the checkout; default none: the expert acts), BETA, LABEL_EPISODES (per

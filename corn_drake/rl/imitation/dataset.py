@@ -1,12 +1,12 @@
 """The expert's labels as training arrays: every labelled state rebuilt (rl/planner/labels.py)
 and each of its candidates turned into the chooser's features (features.py).
 
-The labels are the data (models/labels/TASK/*.labels.jsonl, written by `corn-drake label`, or an
+The labels are the data (models/labels/TASK/*.labels.jsonl.gz, written by `corn-drake label`, or an
 `evaluate --run planner` report's); a state's observation is rebuilt from its episode's seed and
 the object's recorded pose (rl/planner/labels.labelled_states; older files: replayed, which drifts)
 on the objects of the library the labels name (its content hash checked when the file records
-one). The arrays of one labels file are kept in a cache folder under the file's
-sha256, so a second fit reads them at once.
+one). The arrays of one labels file are kept in a cache folder under the sha256 of its text
+(gzipped or not: the same labels find the same arrays), so a second fit reads them at once.
 
 Arrays (one row per candidate): "x" (R, F) the features with the token last, "reward" (R,), "value"
 (R,) NaN outside the beam, "state" (R,) the state's index; per state (a searched state, then the
@@ -27,17 +27,25 @@ import numpy as np
 from corn_drake.errors import InputError
 
 CACHE_VERSION = 2  # bump when what a row or state holds changes (2: reached states)
-LABELS_SUFFIX = ".labels.jsonl"
 KEY_CHARS = 20  # of a labels file's sha256, naming its cached arrays
 
 
 def label_files(paths: list[Path]) -> list[Path]:
-    """The labels files `paths` name (files, or folders read for *.labels.jsonl), sorted within
-    each folder, or an error naming the path with none."""
+    """The labels files `paths` name (files, or folders read for *.labels.jsonl.gz and the
+    plain *.labels.jsonl older runs wrote), sorted within each folder, or an error naming the
+    path with none."""
+    from corn_drake.rl.planner.labels import LABELS_SUFFIX, PLAIN_LABELS_SUFFIX
+
     out = []
     for path in map(Path, paths):
         if path.is_dir():
-            found = sorted(path.glob(f"*{LABELS_SUFFIX}"))
+            found = sorted([*path.glob(f"*{LABELS_SUFFIX}"),
+                            *path.glob(f"*{PLAIN_LABELS_SUFFIX}")])
+            both = [p for p in found if p.suffix != ".gz" and p.with_name(p.name + ".gz")
+                    in found]
+            if both:  # one round's labels twice: a fit would count them twice
+                raise InputError(f"--labels {path}: {both[0].name} and its gzipped copy are "
+                                 "both there; keep one")
             if not found:
                 raise InputError(f"--labels {path}: no *{LABELS_SUFFIX} files (written by "
                                  "`corn-drake label`)")
@@ -50,7 +58,9 @@ def label_files(paths: list[Path]) -> list[Path]:
 
 
 def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    from corn_drake.storage.gz_lines import read_text
+
+    return hashlib.sha256(read_text(path)[0].encode()).hexdigest()
 
 
 def file_arrays(path: Path, library: Path, cache: Path | None, progress: bool = False) -> dict:

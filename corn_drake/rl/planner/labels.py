@@ -1,7 +1,8 @@
-"""The 6D expert's labels as data: what `evaluate --run planner` wrote to REPORT.labels.jsonl,
+"""The 6D expert's labels as data: what `evaluate --run planner` wrote to REPORT.labels.jsonl.gz,
 read back, and a labelled episode replayed to the very states its labels describe.
 
-A labels file: a header line ({"settings": the evaluation's, as its rows file's; "columns":
+A labels file, JSON lines gzipped a line per member (storage/gz_lines.py; files written before
+were plain REPORT.labels.jsonl, read the same and gzipped by the next resume): a header line ({"settings": the evaluation's, as its rows file's; "columns":
 search.LABEL_COLUMNS}), then one line per episode ({"episode", "object", "seed",
 "decisions": [{"chosen", "executed", "labels": [a row per root candidate]}]}). A state is not
 stored (512 cloud points and more per decision) but the object's pose there is (`pose`, to a
@@ -23,13 +24,52 @@ import numpy as np
 
 from corn_drake.errors import InputError
 
+LABELS_SUFFIX = ".labels.jsonl.gz"
+PLAIN_LABELS_SUFFIX = ".labels.jsonl"  # the files written before the labels were gzipped
+
+
+def plain_path_of(path: Path) -> Path:
+    """X.labels.jsonl for X.labels.jsonl.gz: where an older writer kept the same labels."""
+    return path.with_name(path.name.removesuffix(".gz"))
+
+
+def gzip_plain_labels(path: Path) -> None:
+    """Labels file `path` (X.labels.jsonl.gz) made from its plain predecessor X.labels.jsonl
+    where only that exists (a run resumed from before the labels were gzipped; a last line a
+    kill cut short is dropped, as a resume would), which is then removed. Both there: refused,
+    naming both, as they may hold different episodes."""
+    from corn_drake.storage.gz_lines import write_lines
+
+    plain = plain_path_of(path)
+    if plain == path or not plain.exists():
+        return
+    if path.exists():
+        raise InputError(f"{plain} and {path} both hold labels of this run; remove the one "
+                         "not to resume from")
+    lines = plain.read_text().splitlines()
+    if lines and not _is_json(lines[-1]):
+        lines.pop()
+    write_lines(path, [line for line in lines if line.strip()])
+    plain.unlink()
+
+
+def _is_json(line: str) -> bool:
+    try:
+        json.loads(line)
+    except json.JSONDecodeError:
+        return False
+    return True
+
 
 def read_labels(path: str | Path) -> tuple[dict, list[str], list[dict]]:
-    """(settings, columns, episode records in file order, an episode's last line kept)."""
+    """(settings, columns, episode records in file order, an episode's last line kept), from a
+    gzipped or plain labels file; a last member or line a kill cut short is left out."""
+    from corn_drake.storage.gz_lines import read_lines
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such labels file")
-    lines = [line for line in path.read_text().splitlines() if line.strip()]
+    lines = [line for line in read_lines(path)[0] if line.strip()]
     try:
         header = json.loads(lines[0]) if lines else {}
     except json.JSONDecodeError:
