@@ -220,7 +220,10 @@ def main(argv: list[str] | None = None) -> int:
         if signum is None and is_disk_full(e) and not debug:
             # A full disk is no bug: one line naming the file. Every write is atomic (temporary
             # file + rename), so what was written before it is complete and kept.
-            where = f" writing {e.filename}" if getattr(e, "filename", None) else ""
+            # A copy that fills the disk names its source first and its target second
+            # (shutil): the disk that is full is the target's.
+            target = getattr(e, "filename2", None) or getattr(e, "filename", None)
+            where = f" writing {target}" if target else ""
             print(f"{args._prog}: error: no space left on the device{where}; the files written "
                   "before are complete and kept: free space there and run the same command "
                   "again to resume", file=sys.stderr)

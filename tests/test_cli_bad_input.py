@@ -58,6 +58,13 @@ ROWS = [
     _row(f"objects --drops 0 {OUT}", "--drops"),
     _row(f"objects --seed -1 {OUT}", "--seed"),
     _row("objects --num-objects 2", "--out"),
+    # Ownership (issue 63): a folder holding what the command did not make is refused, named.
+    _row("objects --num-objects 2 --out {root}/run_no_history", "{root}/run_no_history",
+         "metrics.json", "did not make"),
+    _row(f"contact-data --objects {{root}}/lib --num-samples 8 --out {{root}}/lib",
+         "{root}/lib", "manifest.json", "did not make"),
+    _row("demo --out {root}/run_no_history", "--out {root}/run_no_history", "metrics.json",
+         "the demo did not write"),
     _row("objects --source {root}/empty_meshes --out {root}/new_lib", "{root}/empty_meshes"),
     _row("objects --source {root}/nowhere --out {root}/new_lib", "{root}/nowhere"),
     # contact-data (items 4, 12, 15)
@@ -83,6 +90,11 @@ ROWS = [
     _row(f"train --rollout-steps 0 {OUT}", "--rollout-steps"),
     _row(f"train --workers -1 {OUT}", "--workers"),
     _row(f"train --minibatches 0 {OUT}", "--minibatches"),
+    # More minibatches than a rollout's transitions (issue 63: cut to one each without a word).
+    _row(f"train --rollout-steps 4 --envs-per-worker 2 --minibatches 9 {OUT}", "--minibatches",
+         "rollout_steps (4) x envs_per_worker (2)"),
+    _row(f"train --rollout-steps 4 --envs-per-worker 2 --set ppo.minibatches=9 {OUT}",
+         "ppo.minibatches", "rollout's transitions", "got 9"),
     _row(f"train --init-log-std nan {OUT}", "--init-log-std"),
     # A Ray address nothing answers at: one line at once, not ray.init retrying for minutes.
     _row("train --policy state --workers 1 --ray-address 127.0.0.1:1 --out {root}/new_run",
@@ -219,6 +231,10 @@ ROWS = [
     _row(f"bench student {BENCH_REPORT} --config {{root}}/bad_type.yaml", "{root}/bad_type.yaml"),
     # demo
     _row("demo --out {root}/demo --num-objects 0", "--num-objects"),
+    # A library with no unseen object: refused before its first stage builds anything (issue
+    # 63: built a library, contact data and an encoder first).
+    _row("demo --out {root}/demo --num-objects 2", "--num-objects 2", "0 unseen",
+         "--num-objects 3"),
     _row("demo --out {root}/demo --num-samples 0", "--num-samples"),
     _row("demo --out {root}/demo --pretrain-steps 0", "--pretrain-steps"),
     _row("demo --out {root}/demo --train-steps -1", "--train-steps"),

@@ -111,8 +111,8 @@ def test_a_library_recorded_with_the_old_num_spelling_resumes(tmp_path):
 
     (tmp_path / "arguments.json").write_text(json.dumps({"--num": 4, "--seed": 0}))
     with pytest.raises(InputError, match="--num-objects: recorded 4, requested 2"):
-        resume_arguments(tmp_path, {"--num-objects": 2, "--seed": 0},
+        resume_arguments(tmp_path, {"--num-objects": 2, "--seed": 0}, made_by="objects",
                          may_grow=("--num-objects",), renamed=RECORDED_RENAMES)
     resume_arguments(tmp_path, {"--num-objects": 6, "--seed": 0}, may_grow=("--num-objects",),
-                     renamed=RECORDED_RENAMES)
+                     renamed=RECORDED_RENAMES, made_by="objects")
     assert json.loads((tmp_path / "arguments.json").read_text())["--num-objects"] == 6

@@ -43,6 +43,14 @@ def test_library_command_is_parsed_and_checked():
         library_arguments("python build.py --out x")
     with pytest.raises(InputError, match="no --out"):
         library_arguments("corn-drake objects --num-objects 8")
+    # Read by `objects`' own parser: a switch is not taken for the next flag's value (a library
+    # of one's own meshes kept at their size), and what `objects` refuses is refused here.
+    mine = library_arguments("corn-drake objects --source meshes/ --keep-size --unit cm "
+                             "--out data/mine")
+    assert mine == {"--source": "meshes/", "--keep-size": True, "--unit": "cm",
+                    "--out": "data/mine"}
+    with pytest.raises(InputError, match="--library-command .*--unit"):
+        library_arguments("corn-drake objects --unit inch --out x")
 
 
 def test_a_card_quotes_only_its_own_runs_unseen_report(tmp_path):

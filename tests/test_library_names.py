@@ -325,3 +325,18 @@ def test_the_cli_prints_a_full_disk_in_one_line(tmp_path, monkeypatch, capsys):
     assert main(["objects", "--out", str(tmp_path / "unused")]) == 2
     one_error_line(capsys, "no space left", f"writing {report}", "run the same command again")
     assert not report.exists() and list(tmp_path.glob(".report.json.*")) == []
+    # A copy that fills the disk (shutil names the source first, the target second): the
+    # target is the file whose disk is full, so it is the one named.
+    import shutil
+
+    source, target = tmp_path / "mesh.obj", tmp_path / "copied.obj"
+    source.write_bytes(b"v 0 0 0\n" * 1000)
+
+    def full_sendfile(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "sendfile", full_sendfile)
+    monkeypatch.setattr(objects, "run", lambda args: shutil.copyfile(source, target))
+    assert main(["objects", "--out", str(tmp_path / "unused")]) == 2
+    line = one_error_line(capsys, "no space left", f"writing {target}")
+    assert str(source) not in line

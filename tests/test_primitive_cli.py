@@ -101,6 +101,11 @@ def test_a_killed_primitive_run_resumes_at_its_checkpoint(tmp_path, capsys, monk
     one_error_line(capsys, "encoder")
     assert _checkpoint(run)["global_step"] == 32
     assert not stray.exists()
+    # A step count between whole rounds (2 envs: 2 primitives a round) is trained as the next
+    # whole round, and said.
+    assert _train(run, 33, "--set", "checkpoint_every=8") == 0
+    assert "--steps 33 trained as 34" in capsys.readouterr().out
+    assert _checkpoint(run)["global_step"] == 34
 
 
 def test_a_corrupt_newest_replay_resumes_from_the_previous_checkpoint_and_replay(tmp_path, capsys):

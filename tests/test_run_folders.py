@@ -338,17 +338,54 @@ def test_a_failure_before_any_output_leaves_no_trace_but_one_after_keeps_the_rec
     fresh = tmp_path / "fresh"
     with pytest.raises(RuntimeError):
         with lock_folder(fresh):
-            resume_arguments(fresh, {"--seed": 0})
+            resume_arguments(fresh, {"--seed": 0}, made_by="contact-data")
             raise RuntimeError("bad input found after the lock")
     assert not fresh.exists()  # the folder it made is gone with its bookkeeping
     started = tmp_path / "started"
     with pytest.raises(RuntimeError):
         with lock_folder(started):
-            resume_arguments(started, {"--seed": 0})
+            resume_arguments(started, {"--seed": 0}, made_by="contact-data")
             (started / "shard_0.npz").write_bytes(b"partial output")
             raise RuntimeError("killed mid-way")
     # Real output exists: the argument record stays, so a resume is checked against it.
     assert (started / "arguments.json").is_file() and (started / "shard_0.npz").is_file()
+
+
+@pytest.mark.parametrize("recorded, maker", [
+    ({"made_by": "contact-data", "--seed": 0}, "contact-data"),
+    # Records from before they named their command: known by the arguments only it records.
+    ({"--source": "procedural", "--seed": 0}, "objects"),
+    ({"--objects": "lib", "--num-samples": 8}, "contact-data"),
+    ({"--data": "data/contact"}, "pretrain"),
+])
+def test_a_folder_another_command_made_is_refused_naming_it(tmp_path, recorded, maker):
+    """Ownership (issue 63): a resumable command writes only into a new or empty folder, or one
+    it made; another command's folder, or one holding what no command recorded, is named."""
+    import json
+
+    from corn_drake.errors import InputError
+    from corn_drake.run_folders.guards import resume_arguments
+
+    folder = tmp_path / "theirs"
+    folder.mkdir()
+    (folder / "arguments.json").write_text(json.dumps(recorded))
+    other = "objects" if maker != "objects" else "pretrain"
+    with pytest.raises(InputError, match=f"holds the output of `corn-drake {maker}`"):
+        resume_arguments(folder, {"--seed": 0}, made_by=other)
+    assert json.loads((folder / "arguments.json").read_text()) == recorded  # left as it was
+    resume_arguments(folder, {"--seed": 0}, made_by=maker)  # its own: resumed
+    assert json.loads((folder / "arguments.json").read_text())["made_by"] == maker
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text("policy: state\n")
+    with pytest.raises(InputError, match="holds a run .config.yaml., which `corn-drake objects`"):
+        resume_arguments(run, {"--seed": 0}, made_by="objects")
+    # Without a record, a folder holding this command's own older output is its own.
+    library = tmp_path / "older_library"
+    library.mkdir()
+    (library / "manifest.json").write_text("{}")
+    resume_arguments(library, {"--seed": 0}, made_by="objects",
+                     holds_own=lambda f: (f / "manifest.json").is_file())
 
 
 def test_a_failure_before_any_output_removes_the_parents_it_made_and_only_those(tmp_path):

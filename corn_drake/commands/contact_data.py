@@ -63,8 +63,15 @@ def run(args) -> int:
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.run_folders.guards import lock_folder, resume_arguments
 
+    from corn_drake.assets.library import list_objects
+    from corn_drake.errors import InputError
+
+    # The input before the output folder is claimed: a missing library is the mistake to name.
+    if not list_objects(args.objects, "train"):
+        raise InputError(f"object library {args.objects} has no train objects")
     with lock_folder(args.out):
-        resume_arguments(args.out, output_arguments(args), legacy=manifest_arguments)
+        resume_arguments(args.out, output_arguments(args), made_by=NAME,
+                         legacy=manifest_arguments)
         manifest = generate_dataset(args.objects, args.out, args.num_samples, args.seed,
                                     args.eval_samples, args.shard_size, not args.no_progress)
     for split, stats in manifest["splits"].items():

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from corn_drake.arguments.renamed import add_renamed
 from corn_drake.arguments.value_types import positive_int, seed_int
+from corn_drake.errors import InputError
 
 # The task the demo's policy learns (diagrams/tasks/push.yaml): the object within 5 cm of a
 # goal 8-12 cm beyond it.
@@ -60,6 +61,50 @@ def add_arguments(parser):
     add_renamed(parser, "--contact-samples", "--num-samples", " (as in `contact-data`)")
 
 
+def split_counts(num_objects: int, seed: int) -> tuple[int, int]:
+    """(train, unseen) objects of the procedural library of `num_objects` at `seed`, as planned
+    (assets/splits.py: a pure function of the ids, so known before anything is built)."""
+    from corn_drake.assets.library import planned_procedural
+    from corn_drake.assets.splits import assign_splits
+
+    planned = planned_procedural(num_objects)
+    assign_splits(planned, seed)
+    unseen = sum(o.split == "unseen" for o in planned)
+    return len(planned) - unseen, unseen
+
+
+def _check_split(num_objects: int, seed: int) -> None:
+    """The demo trains on the library's train objects and evaluates on its unseen ones: a library
+    without both is refused before its first stage (issue 63: `--num-objects 1` built a library,
+    contact data and an encoder, then failed)."""
+    train, unseen = split_counts(num_objects, seed)
+    if train and unseen:
+        return
+    enough = next(n for n in range(num_objects + 1, 200) if all(split_counts(n, seed)))
+    raise InputError(f"--num-objects {num_objects}: its library would hold {train} train and "
+                     f"{unseen} unseen objects; the demo trains on the one and evaluates on the "
+                     f"other: give --num-objects {enough} or more")
+
+
+# What the demo writes in OUT: a rerun resumes there; a folder holding anything else is not the
+# demo's to write into (issue 63, ownership: a run, shipped weights, a library of one's own).
+DEMO_ENTRIES = {"library", "contact_data", "pretrain", "policy", "eval_untrained.json",
+                "eval_trained.json", "eval_shipped.json", "eval_trained_recordings",
+                "demo_summary.json"}
+
+
+def _check_out(out: Path) -> None:
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise InputError(f"--out {out}: is a file; give a folder")
+    other = sorted(set(p.name for p in out.iterdir()) - DEMO_ENTRIES)
+    if other:
+        shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
+        raise InputError(f"--out {out}: holds {shown}, which the demo did not write; give a new "
+                         "folder (or the demo's own, to resume it)")
+
+
 def _stage(name: str, t0: float):
     print(f"[demo] {name} ({time.perf_counter() - t0:.0f} s so far)", flush=True)
 
@@ -74,7 +119,9 @@ def run(args) -> int:
     from corn_drake.rl.run_loading import load_any_run
     from corn_drake.storage.atomic_files import write_json
 
+    _check_split(args.num_objects, args.seed)
     out = Path(args.out)
+    _check_out(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     print("[demo] about 7 minutes on one core (more beside other jobs); each stage's bar says "

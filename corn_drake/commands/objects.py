@@ -150,8 +150,9 @@ def run(args) -> int:
     cfg.keep_size = args.keep_size
     cfg.unit = args.unit
     with lock_folder(args.out):
-        resume_arguments(args.out, output_arguments(args), may_grow=("--num-objects",),
-                         renamed=RECORDED_RENAMES)
+        resume_arguments(args.out, output_arguments(args), made_by=NAME,
+                         may_grow=("--num-objects",), renamed=RECORDED_RENAMES,
+                         holds_own=lambda out: (out / "manifest.json").is_file())
         if args.source == "procedural":
             manifest = build_procedural(args.out, args.num_objects, args.seed, cfg, not args.no_progress,
                                         args.split, workers=args.workers)

@@ -85,7 +85,8 @@ def run(args) -> int:
     list_shards(args.data, "train")  # a missing or empty dataset fails before OUT is touched
     out = Path(args.out)
     with lock_folder(out):
-        resume_arguments(out, {"--data": os.path.normpath(args.data)})
+        resume_arguments(out, {"--data": os.path.normpath(args.data)}, made_by=NAME,
+                         holds_own=lambda f: (f / "metrics.json").is_file())
         return _pretrain(args, out)
 
 
@@ -185,7 +186,8 @@ def _pretrain_pretext(args, out: Path) -> int:
     with lock_folder(run_dir):
         # Refusals (another library, other arguments, an unreadable checkpoint or library) come
         # before the first write.
-        resume_arguments(run_dir, {"--objects": os.path.normpath(args.objects)})
+        resume_arguments(run_dir, {"--objects": os.path.normpath(args.objects)}, made_by=NAME,
+                         holds_own=lambda f: (f / "config.yaml").is_file())
         refuse_changed_config(run_dir, run_dir / "config.yaml", cfg, may_grow=RESUME_MAY_GROW,
                               ignore=RESUME_MAY_CHANGE, name=argument_of_field)
         pretrainer = PretextPretrainer(cfg, args.objects, run_dir)

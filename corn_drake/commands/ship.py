@@ -66,26 +66,45 @@ def add_arguments(parser):
 
 
 def library_arguments(command: str) -> dict[str, str]:
-    """--num-objects/--seed/--out/--split of a `corn-drake objects` command line; anything else is an
-    InputError naming --library-command."""
+    """The flags a `corn-drake objects` command line names, {"--flag": value as written, or
+    True for a switch such as --keep-size}, read by that command's own parser (so a switch is
+    not taken for a flag's value); anything it refuses, or a missing --out, is an InputError
+    naming --library-command."""
+    import argparse
+
+    from corn_drake.commands import objects
     from corn_drake.errors import InputError
 
     words = shlex.split(command)
     if words[:2] != ["corn-drake", "objects"]:
         raise InputError(f"--library-command must be a `corn-drake objects ...` command, got "
                          f"{command!r}")
-    values, key = {}, None
-    for w in words[2:]:
-        if key is not None:
-            values[key], key = w, None
-        elif w.startswith("--") and "=" in w:
-            k, v = w.split("=", 1)
-            values[k] = v
-        elif w.startswith("--"):
-            key = w
-    if "--out" not in values:
-        raise InputError(f"--library-command {command!r} has no --out")
-    return values
+
+    class Parser(argparse.ArgumentParser):
+        def error(self, message):
+            if "--out" in message:
+                raise InputError(f"--library-command {command!r} has no --out")
+            raise InputError(f"--library-command {command!r}: {message}")
+
+    parser = Parser(prog="corn-drake objects", add_help=False)
+    objects.add_arguments(parser)
+    for action in parser._actions:  # only what the command line names
+        action.default = argparse.SUPPRESS
+    named = vars(parser.parse_args(words[2:]))
+    flags = {a.dest: a.option_strings[0] for a in parser._actions if a.option_strings}
+    raw = {flags[dest]: value for dest, value in named.items()}
+    # As written (a string), so the card's command and the rebuilt one compare as text.
+    return {flag: value if isinstance(value, bool) else _as_written(words, flag, value)
+            for flag, value in raw.items()}
+
+
+def _as_written(words: list[str], flag: str, parsed) -> str:
+    for i, word in enumerate(words):
+        if word == flag and i + 1 < len(words):
+            return words[i + 1]
+        if word.startswith(flag + "="):
+            return word.split("=", 1)[1]
+    return str(parsed)
 
 
 def with_hull_budget(command: str, library: dict[str, str]) -> str:

@@ -121,6 +121,13 @@ class TrainConfig(RunSettings):
               # as PrimitiveTrainConfig; `train` sends them there by this field).
               "policy": one_of((*POLICY_KINDS, PRIMITIVE_POLICY)),
               "init_from": "text"}  # a run folder: checked by rl/checkpoints.check_init_source
+    # A rollout is rollout_steps x envs transitions (envs: envs_per_worker on each of
+    # max(workers, 1)); more minibatches than transitions were cut to one each without a word
+    # (torch.chunk), so the optimiser steps the user asked for did not happen (issue 63).
+    RELATIONS = (relation("ppo.minibatches", "<= the rollout's transitions, {rollout_steps} x "
+                          "{envs_per_worker} x max(1, {workers})",
+                          lambda m, steps, envs, workers: m <= steps * envs * max(1, workers),
+                          "rollout_steps", "envs_per_worker", "workers"),)
     policy: str = "state"
     rollout_steps: int = 32  # per env and update
     # Keep a copy of the checkpoint as checkpoints/step_NNNNNNNNN.pt each time training passes

@@ -16,7 +16,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-CARD = "card.json"
+from corn_drake.storage.weights_card import CARD
+
 HASH_KEY = "library_content_hash"
 OBJECTS_KEY = "library_object_hashes"
 
@@ -30,12 +31,11 @@ def library_card_fields(library: str | Path) -> dict:
 
 
 def _card(run: str | Path) -> dict | None:
-    """The card of a shipped weights folder, None for anything else (a run folder, a reference
-    controller's name)."""
-    from corn_drake.storage.atomic_files import read_json
+    """The card of a shipped weights folder, its fields' types checked (storage/weights_card.py),
+    None for anything else (a run folder, a reference controller's name)."""
+    from corn_drake.storage.weights_card import read_card
 
-    path = Path(run) / CARD
-    return read_json(path, "weights card") if path.is_file() else None
+    return read_card(run)
 
 
 def require_library(run: str | Path, library: str | Path, given: bool) -> None:

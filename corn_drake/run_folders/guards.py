@@ -26,6 +26,7 @@ from corn_drake.storage.atomic_files import read_json, write_json
 
 LOCK_NAME = ".lock"
 ARGUMENTS_NAME = "arguments.json"
+MADE_BY = "made_by"  # the arguments.json key naming the command that made the folder
 
 
 @contextmanager
@@ -148,25 +149,70 @@ def read_recorded_arguments(folder: str | os.PathLike) -> dict | None:
 
 
 def resume_arguments(folder: str | os.PathLike, requested: Mapping[str, Any], *,
+                     made_by: str,
                      may_grow: Iterable[str] = (),
                      legacy: Callable[[Path], Mapping[str, Any] | None] | None = None,
+                     holds_own: Callable[[Path], bool] | None = None,
                      renamed: Mapping[str, str] | None = None) -> None:
     """Refuses if `folder` was made with other values of the arguments that define its output
-    (`requested`, keyed by option name); otherwise records them in FOLDER/arguments.json before
-    any work, so even a killed job leaves its record.
+    (`requested`, keyed by option name), or is not `made_by`'s to write (below); otherwise
+    records them, and the command, in FOLDER/arguments.json before any work, so even a killed
+    job leaves its record.
 
     `legacy(folder)` recovers the arguments of a folder made before the record was kept (from
-    its manifest, say), or returns None when nothing says. `renamed` maps an option's old
-    spelling, as an older record may hold it, to its current one.
+    its manifest, say), or returns None when nothing says; `holds_own(folder)` says whether a
+    folder without a record holds this command's output all the same (an older library's
+    manifest.json). `renamed` maps an option's old spelling, as an older record may hold it, to
+    its current one.
+
+    Whose folder (issue 63, ownership): a folder another command recorded, or one holding
+    anything without a record that is not this command's own (a run, shipped weights, another
+    command's output, files of the user's), is refused in one line naming what is there: a
+    command writes only into a new or empty folder or one it made.
     """
     folder = Path(folder)
     recorded = read_recorded_arguments(folder)
+    maker = None if recorded is None else recorded.get(MADE_BY) or _legacy_maker(recorded)
+    if maker is not None and maker != made_by:
+        raise InputError(f"{folder}: holds the output of `corn-drake {maker}`, not of "
+                         f"`corn-drake {made_by}`; give another folder")
     if recorded is None and legacy is not None:
         recorded = legacy(folder)
+    if recorded is None and not (holds_own is not None and holds_own(folder)):
+        found = sorted(set(os.listdir(folder)) - {LOCK_NAME, ARGUMENTS_NAME})
+        if found:
+            raise InputError(f"{folder}: holds {describe_contents(folder, found)}, which "
+                             f"`corn-drake {made_by}` did not make; it writes only into a new "
+                             "or empty folder or one it made: give another folder")
     if recorded is not None:
         recorded = {(renamed or {}).get(k, k): v for k, v in recorded.items()}
         refuse_changed_arguments(folder, recorded, requested, may_grow=may_grow)
-    write_json(folder / ARGUMENTS_NAME, dict(requested))
+    write_json(folder / ARGUMENTS_NAME, {MADE_BY: made_by, **requested})
+
+
+def _legacy_maker(recorded: Mapping[str, Any]) -> str | None:
+    """The command that wrote a record from before records named it, by the arguments only it
+    records (objects: --source; contact-data: --num-samples; pretrain: --data, or --objects
+    alone for a pretext model's folder)."""
+    if "--source" in recorded:
+        return "objects"
+    if "--num-samples" in recorded:
+        return "contact-data"
+    if "--data" in recorded or set(recorded) == {"--objects"}:
+        return "pretrain"
+    return None
+
+
+def describe_contents(folder: Path, found: list[str]) -> str:
+    """What a folder holds, for a refusal: what it recognisably is, else its first entries."""
+    if (folder / "card.json").is_file():
+        return "shipped weights (card.json)"
+    if (folder / "config.yaml").is_file():
+        return "a run (config.yaml)"
+    if (folder / "manifest.json").is_file():
+        return "an object library or dataset (manifest.json)"
+    shown = ", ".join(found[:3]) + (f" and {len(found) - 3} more" if len(found) > 3 else "")
+    return f"{len(found)} entries of something else ({shown})"
 
 
 def refuse_changed_config(folder: str | os.PathLike, recorded_path: str | os.PathLike, cfg: Any,

@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 from corn_drake.errors import InputError
+from corn_drake.storage.weights_card import CARD, read_card
 
 
 def _describe(path: Path) -> str:
@@ -48,15 +49,17 @@ def check_folder_owner(out: Path, source: str, overwrite: bool, flag: str = "--o
     entries = list(out.iterdir())
     if not entries:
         return
-    card = out / "card.json"
-    if card.is_file():
+    if (out / CARD).is_file():
         try:
-            shipped_from = json.loads(card.read_text()).get("source_run")
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError):
-            shipped_from = None
+            shipped_from = (read_card(out) or {}).get("source_run")
+        except InputError as e:  # a damaged card: whose weights these are is not known
+            raise InputError(f"{flag} {out}: holds shipped weights whose card cannot be read "
+                             f"({e}); give a new folder, or --overwrite to replace them with "
+                             f"the weights of {source}") from None
         if shipped_from == source:
             return
-        what = f"the weights shipped from {shipped_from}"
+        what = (f"the weights shipped from {shipped_from}" if shipped_from else
+                "shipped weights whose card names no source_run")
     elif (out / "manifest.json").is_file():
         what = "an object library"
     elif (out / "config.yaml").is_file():

@@ -228,6 +228,7 @@ class PrimitiveTrainer:
         last_log = self.global_step // cfg.log_every
         last_checkpoint = self.global_step // cfg.checkpoint_every
         arrivals = self._arrivals()
+        started = self.global_step
         while self.global_step < cfg.total_steps:
             transitions = next(arrivals)
             self._store(transitions)
@@ -251,6 +252,10 @@ class PrimitiveTrainer:
                 last_checkpoint = self.global_step // cfg.checkpoint_every
                 self._save()
         self._save()
+        if self.global_step > cfg.total_steps > started:
+            # Said, not rounded without a word (issue 63): a round is one primitive per env.
+            print(f"--steps {cfg.total_steps} trained as {self.global_step}: whole rounds of "
+                  "one primitive per env", flush=True)
         where = {}
         if self.workers is not None:  # where the workers ran, what died and why
             where = self.workers.record.report()
