@@ -128,7 +128,7 @@ PROBES = [
     (TrainConfig, "device=gpu", "device", "cuda"),
     (TrainConfig, "policy=cron", "policy", "corn"),
     (PrimitiveTrainConfig, "replay_capacity=4", "learning_starts", "replay_capacity"),
-    (PrimitiveTrainConfig, "batch_size=300000", "batch_size", "replay_capacity"),
+    (PrimitiveTrainConfig, "batch_size=300000", "batch_size", "[1, 65536]"),
     (DistillConfig, "frozen=[gru,gru]", "frozen", "distinct"),
     (DistillConfig, "cameras.eyes=[[0,0,0.45]]", "cameras.eyes", "away from"),
 ]

@@ -24,11 +24,13 @@ _SCHEDULE = (relation("min_lr", "<= {lr}", lambda low, lr: low <= lr, "lr"),
 class PretrainConfig:
     """Contact pretraining (paper: AdamW 2e-4, wd 5e-4, batch 1024, cosine schedule + warm-up)."""
     # Range checks (config/bounds.py): what check_bounds refuses.
+    # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
+    # traceback after the config was written): a batch 16x the paper's 1024; a million held-out samples.
     BOUNDS = {"steps": ">= 1",
-              "batch_size": ">= 1", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
+              "batch_size": "[1, 16384]", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
               "warmup_steps": ">= 0", "max_grad_norm": "> 0", "translate_std": ">= 0",
               "point_noise_std": ">= 0", "eval_every": ">= 1", "checkpoint_every": ">= 1",
-              "eval_samples": ">= 1", "seed": "seed", "model": one_of(CONTACT_MODELS)}
+              "eval_samples": "[1, 1000000]", "seed": "seed", "model": one_of(CONTACT_MODELS)}
     RELATIONS = _SCHEDULE
     model: str = "corn"  # corn | pointnet
     steps: int = 2000
@@ -58,12 +60,14 @@ TARGET_NORMS = ("instance", "layer")
 @dc.dataclass
 class PretextConfig:
     # Range checks (config/bounds.py): what check_bounds refuses.
+    # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
+    # traceback after the config was written): a batch 16x the contact pretraining's 1024; a million held-out samples.
     BOUNDS = {"steps": ">= 1",
-              "batch_size": ">= 1", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
+              "batch_size": "[1, 16384]", "lr": "> 0", "min_lr": ">= 0", "weight_decay": ">= 0",
               "warmup_steps": ">= 0", "max_grad_norm": "> 0", "dropout": "[0, 1)",
               "point_noise_std": ">= 0", "mask_ratio": "(0, 1)", "smooth_l1_beta": "> 0",
               "ema_start_horizon": "> 0", "ema_end_horizon": "> 0", "ema_ramp_fraction": "(0, 1]",
-              "eval_every": ">= 1", "checkpoint_every": ">= 1", "eval_samples": ">= 1",
+              "eval_every": ">= 1", "checkpoint_every": ">= 1", "eval_samples": "[1, 1000000]",
               "seed": "seed", "model": one_of(PRETEXT_MODELS),
               "target_norm": one_of(TARGET_NORMS)}
     # The EMA teacher's decay rises over the ramp (see below): its horizon must not shrink.

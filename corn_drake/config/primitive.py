@@ -133,14 +133,15 @@ class PrimitiveTrainConfig(RunSettings):
     (rl/primitive/td3.TD3Settings.for_run reads them)."""
     # replay_capacity's bound: ~20 KB per transition (the 16 locations' tokens and features, now
     # and next), so a million is ~20 GB at most (np.zeros pages in lazily; 1e12 was a
-    # MemoryError after the config was written); hidden: 4096 is 16x the shipped 256.
+    # MemoryError after the config was written); hidden: 4096 is 16x the shipped 256; a batch
+    # of 65536 transitions; 64 hindsight goals per transition (each one more stored copy).
     BOUNDS = {"replay_capacity": "[1, 1000000]", "learning_starts": ">= 1",
               "updates_per_step": ">= 0",
-              "batch_size": ">= 1", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
+              "batch_size": "[1, 65536]", "gamma": "(0, 1]", "tau": "(0, 1]", "actor_lr": "> 0",
               "critic_lr": "> 0", "policy_delay": ">= 1", "target_noise": ">= 0",
               "target_noise_clip": ">= 0", "temperature": "> 0", "motion_noise": ">= 0",
               "random_steps": ">= 0", "log_every": ">= 1", "hidden": "[1, 4096]",
-              "hindsight_goals": ">= 0",
+              "hindsight_goals": "[0, 64]",
               "policy": one_of((PRIMITIVE_POLICY,)), "chooser": one_of(PRIMITIVE_CHOOSERS),
               # Run folders: rl/checkpoints resolves and loads them, naming the field.
               "agent_weights": "text", "init_from": "text"}

@@ -99,8 +99,10 @@ LIBRARY_OBJECTS = ("one", "train")
 @dc.dataclass
 class ObjectConfig:
     # Range checks (config/bounds.py): what check_bounds refuses.
+    # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
+    # was written): 65536 points a cloud, 128x the policy's 512.
     BOUNDS = {"radius": "> 0",
-              "length": "> 0", "mass": "> 0", "cloud_points": ">= 1",
+              "length": "> 0", "mass": "> 0", "cloud_points": "[1, 65536]",
               "kind": one_of(OBJECT_KINDS), "size": "vector 3 > 0",
               # Which library and object: check() below says which combinations name objects.
               "library": "text", "library_objects": one_of(LIBRARY_OBJECTS), "object_id": "text"}

@@ -114,9 +114,11 @@ class CameraRigConfig:
     # Range checks (config/bounds.py): what check_bounds refuses. Of Drake's CameraConfig the
     # rig relies on its image size and its clipping and depth ranges (check_camera has Drake's
     # own checks of the rest, and refuses the fields the rig ignores).
+    # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
+    # was written): a 4096-pixel-wide image per camera.
     BOUNDS = {"tracking_fov_margin": "> 0", "mode": one_of(CAMERA_MODES),
               "eyes": "list vector 3 finite", "look_at": "vector 3 finite",
-              "camera.width": ">= 1", "camera.height": ">= 1", "camera.clipping_near": "> 0",
+              "camera.width": "[1, 4096]", "camera.height": "[1, 4096]", "camera.clipping_near": "> 0",
               "camera.clipping_far": "> 0", "camera.z_near": "> 0", "camera.z_far": "> 0"}
     # A camera at the point it looks at has no viewing direction (its pose is undefined).
     RELATIONS = (relation("eyes", "away from {look_at} (each camera looks from its eye to it)",
@@ -178,7 +180,9 @@ class SegmentationConfig:
     seed: int = 0
     # Range checks (config/bounds.py): what check_bounds refuses. outlier_neighbours is a count
     # (0 or 1 keeps every point).
-    BOUNDS = {"num_points": ">= 1", "crop_height": "> 0", "outlier_radius": "> 0",
+    # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
+    # was written): 65536 points a cloud, 128x the policy's 512.
+    BOUNDS = {"num_points": "[1, 65536]", "crop_height": "> 0", "outlier_radius": "> 0",
               "outlier_reference_px_per_m": "> 0", "outlier_neighbours": ">= 0",
               "dbscan_eps": "> 0", "dbscan_min_eps_pixels": ">= 0", "dbscan_min_points": ">= 1",
               "max_px_per_m": "> 0", "mode": one_of(SEGMENTATION_MODES),
@@ -216,7 +220,9 @@ class TrackerConfig:
     min_points: int = 20
     # Range checks (config/bounds.py): what check_bounds refuses. The fitnesses are fractions of
     # points.
-    BOUNDS = {"max_points": ">= 1", "normal_radius": "> 0", "max_correspondence": "> 0",
+    # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
+    # was written): 65536 points a cloud, 128x the policy's 512.
+    BOUNDS = {"max_points": "[1, 65536]", "normal_radius": "> 0", "max_correspondence": "> 0",
               "max_iterations": ">= 1", "reregister_fitness": "[0, 1]",
               "reregister_correspondence": "> 0", "min_fitness": "[0, 1]",
               "max_step_translation": "> 0", "max_step_rotation_deg": "> 0", "min_points": ">= 1"}

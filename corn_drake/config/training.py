@@ -115,8 +115,10 @@ class RunSettings:
 @dc.dataclass
 class TrainConfig(RunSettings):
     # Range checks (config/bounds.py): what check_bounds refuses.
+    # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
+    # traceback after the config was written): 4096 steps of 256 envs' clouds is ~6 GB of rollout.
     BOUNDS = {
-              "rollout_steps": ">= 1", "snapshot_every": ">= 0", "init_log_std": "[-20, 5]",
+              "rollout_steps": "[1, 4096]", "snapshot_every": ">= 0", "init_log_std": "[-20, 5]",
               # A PPO run's policy: a teacher variant, or the primitive policy (whose runs load
               # as PrimitiveTrainConfig; `train` sends them there by this field).
               "policy": one_of((*POLICY_KINDS, PRIMITIVE_POLICY)),
@@ -155,7 +157,9 @@ class TrainConfig(RunSettings):
 @dc.dataclass
 class DistillConfig(RunSettings):
     # Range checks (config/bounds.py): what check_bounds refuses.
-    BOUNDS = {"window": ">= 1",
+    # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
+    # traceback after the config was written): a BPTT window of 1024 steps keeps every step's activations.
+    BOUNDS = {"window": "[1, 1024]",
               "beta_start": "[0, 1]", "beta_anneal_steps": ">= 0", "lr": "> 0",
               "max_grad_norm": "> 0", "log_every": ">= 1",
               "teacher": "text",  # a run folder: rl/dagger loads and checks it
