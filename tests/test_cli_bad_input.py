@@ -124,7 +124,7 @@ ROWS = [
     # evaluate (items 8, 14)
     _row(f"evaluate --run scripted --episodes 0 {REPORT}", "--episodes"),
     _row(f"evaluate --run scripted --checkpoint step_000000064.pt {REPORT}", "--checkpoint",
-         "not a `corn-drake train` run"),
+         "kept checkpoints", "reference controller"),
     _row(f"evaluate --run scripted --record -1 {REPORT}", "--record"),
     _row(f"evaluate --run scripted --torch-threads 1.5 {REPORT}", "--torch-threads"),
     _row(f"evaluate --run scripted --seed -1 {REPORT}", "--seed"),
@@ -279,7 +279,7 @@ ROWS += [
     _row("label --objects {root}/lib --ray-address 127.0.0.1:1 --out {root}/out/l",
          "--ray-address needs --workers"),
     _row("evaluate --run still --workers 2 --report {root}/out/r.json",
-         "--workers and --ray-address apply to --run planner"),
+         "--workers 2 applies to the 6D expert", "--run still is a reference controller"),
     _row("fit-chooser --labels {root}/nosuch --objects {root}/lib --out-run {root}/out/f",
          "--labels {root}/nosuch"),
     _row("fit-chooser --labels {root}/lib --objects {root}/lib --out-run {root}/out/f",

@@ -265,9 +265,9 @@ def test_a_state_with_no_candidate_ends_its_branch_and_a_root_with_none_is_named
 
 
 def test_planner_settings_go_through_the_common_set_path_in_one_line():
-    from corn_drake.rl.run_loading import LoadedRun
+    from corn_drake.rl.runs.kinds import load_any_run
 
-    loaded = LoadedRun("planner", "planner", None, None, "planner")
+    loaded = load_any_run("planner")
     run_cfg, changes = loaded.configure(None, ["planner.beam=3", "primitive.push_height=0",
                                                "task.episode_steps=50",
                                                "planner.sources=[policy, turn]"])
@@ -284,7 +284,7 @@ def test_planner_settings_go_through_the_common_set_path_in_one_line():
                           (["primitive.speed=1"], "unknown key"),
                           (["ppo.lr=1"], "unknown key .ppo.; the run config has env, primitive, planner")):
         with pytest.raises(InputError, match=message):
-            LoadedRun("planner", "planner", None, None, "planner").configure(None, sets)
+            load_any_run("planner").configure(None, sets)
 
 
 def test_every_named_source_is_registered_and_a_bad_policy_run_is_named():
@@ -320,7 +320,7 @@ def test_evaluate_refuses_episodes_from_for_a_learned_policy(tmp_path, capsys):
     code = main(["evaluate", "--run", "scripted", "--episodes-from", "3", "--episodes", "5",
                  "--report", str(tmp_path / "r.json")])
     assert code != 0
-    assert "--episodes-from applies to --run planner" in capsys.readouterr().err
+    assert "--episodes-from 3 applies to the 6D expert" in capsys.readouterr().err
 
 
 def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys):

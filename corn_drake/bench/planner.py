@@ -108,9 +108,9 @@ def time_bare(env, expansions) -> dict:
 
 def run(args) -> dict:
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-    from corn_drake.rl.run_loading import LoadedRun
+    from corn_drake.rl.runs.kinds import load_any_run
 
-    loaded = LoadedRun("planner", "planner", None, None, "planner")
+    loaded = load_any_run("planner")
     run_cfg, _ = loaded.configure(args.task, args.set)
     policy = loaded.agent
     env = PrimitiveEnv(run_cfg.env, policy.primitive, _object_spec(args))

@@ -62,6 +62,10 @@ def run(args) -> int:
     import torch
 
     from corn_drake.rl.primitive.outcome.collect import collect_chunks
+    from corn_drake.rl.runs.kinds import require_kind
+
+    # The proposing run through the registry of run kinds: another kind is named as such.
+    require_kind(str(args.run), "primitive", flag="RUN", needs="`collect-outcomes`")
 
     # One thread: collections run as many one-core processes side by side (16 on the lent
     # machine), and the per-state network calls are too small to gain from more.

@@ -115,8 +115,7 @@ def run(args) -> int:
     from corn_drake.config.pretraining import PretrainConfig
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.pretraining.contact import Pretrainer
-    from corn_drake.rl.primitive.agent import load_primitive_run
-    from corn_drake.rl.run_loading import load_any_run
+    from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.storage.atomic_files import write_json
 
     _check_split(args.num_objects, args.seed)
@@ -160,7 +159,7 @@ def run(args) -> int:
     metrics = train_policy(run_dir, cfg, pre / "encoder.pt")
 
     _stage("6/6 the trained policy, then the shipped one, on the same episodes", t0)
-    _, trained, _ = load_primitive_run(run_dir)
+    trained = load_any_run(str(run_dir)).agent
     after = evaluate_on(trained, cfg.env, objects, args.eval_episodes, out / "eval_trained.json",
                         record=1)
     shipped_run = load_any_run(str(shipped_folder()))

@@ -85,14 +85,17 @@ def load_teacher(run: str):
     """(TrainConfig, TeacherAgent) of the teacher run folder `run`; anything that makes it no
     teacher run is an InputError naming --run."""
     from corn_drake.errors import InputError, MissingInputError
-    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.rl.runs.kinds import require_kind
 
     if not Path(run).is_dir():
         raise MissingInputError(f"--run {run}: no such run folder (the teacher's)")
     try:
-        return load_run(run)
+        # Through the registry of run kinds (rl/runs/kinds.py): another kind is named as such.
+        kind = require_kind(run, "train", needs="`distill`")
+        loaded = kind.load(run)
     except InputError as e:
         raise InputError(f"--run {run} is not a trained teacher run: {e}") from None
+    return loaded.config, loaded.agent
 
 
 def student_env_config(teacher_env, layer: str | None):
@@ -226,8 +229,8 @@ def run(args) -> int:
 
 
 def teacher_weights_hash(run: str) -> str:
-    """rl/run_loading.weights_hash of the teacher run's config and last.pt."""
-    from corn_drake.rl.run_loading import weights_hash
+    """rl/runs/loaded.weights_hash of the teacher run's config and last.pt."""
+    from corn_drake.rl.runs.loaded import weights_hash
 
     return weights_hash(Path(run), Path(run) / "checkpoints" / "last.pt")
 

@@ -18,10 +18,11 @@ the weights it packs. A progress bar counts the episodes (--no-progress: none), 
 recordings' folder (REPORT_recordings/) is printed at the end, and `--keep-open` keeps the
 Meshcat server, whose URL is printed before the episodes, alive until Ctrl-C.
 
-Which policy: `--run` names a `corn-drake train` run (the teacher, or with `--policy primitive`
-the contact-primitive policy), a `corn-drake distill` run (the student: its config.yaml is a
-DistillConfig), or a reference controller; rl/run_loading.py loads any of them. A student is
-evaluated through the full perception chain (cameras, geometric segmentation, ICP tracking,
+Which policy: `--run` names a run of any kind in rl/runs/kinds.py's registry (a `corn-drake
+train` run: the teacher, or with `--policy primitive` the contact-primitive policy; a `corn-drake
+distill` run: the student; a reference controller; `planner`, the 6D expert), and each kind
+declares which of the flags below it takes; rl/runs/kinds.load_any_run loads any of them. A
+student is evaluated through the full perception chain (cameras, geometric segmentation, ICP tracking,
 observation noise) whatever it was trained with, unless `--perception ground_truth` asks for
 the renderer's segmentation (tracking and noise stay on); its report adds `perception` and the
 pose-tracking errors (evaluation.tracking_summary).
@@ -45,12 +46,13 @@ def add_arguments(parser):
     from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
-    parser.add_argument("--run", required=True,
-                        help="run folder written by `corn-drake train` (a dense teacher, or "
-                             "with --policy primitive a contact-primitive policy) or `corn-drake "
-                             "distill` (student); a reference: `scripted` (straight-line pusher) "
-                             "or `still` (zero action); or `planner`, the privileged 6D expert "
-                             "(a search over simulated primitives: --set planner.*)")
+    from corn_drake.rl.runs.kinds import RUN_KINDS
+
+    # The kinds are listed from their registry (rl/runs/kinds.py): a new kind is listed here too.
+    kinds = "; ".join((f"{', '.join(f'`{n}`' for n in k.NAMES)}: {k.WHAT}" if k.NAMES
+                       else f"the folder of {k.WHAT}") + (f" ({k.DETAIL})" if k.DETAIL else "")
+                      for k in RUN_KINDS.values())
+    parser.add_argument("--run", required=True, help=f"the policy to evaluate: {kinds}")
     parser.add_argument("--objects", default="",
                         help="object library folder (default: the run's object, or its library "
                              "when it was trained with `train --objects`)")
@@ -146,7 +148,7 @@ def _object_specs(args, cfg):
 
 
 def run(args) -> int:
-    from corn_drake.rl.run_loading import run_kind_of
+    from corn_drake.rl.runs.kinds import run_kind_of
     from corn_drake.storage.atomic_files import ensure_writable
     from corn_drake.storage.file_locks import locked_output
 
@@ -169,53 +171,45 @@ def run(args) -> int:
     return 0
 
 
-def _refuse_flags(args, kind: str) -> None:
-    """The flags this kind of run has no use for, refused in one line before anything loads."""
-    if args.perception is not None and kind != "distill":
-        what = ("a reference controller" if kind == "reference"
-                else "a teacher run (`corn-drake train`)")
-        raise InputError(f"--perception {args.perception} applies to a student run (written by "
-                         f"`corn-drake distill`); --run {args.run} is {what}")
-    if kind == "reference" and args.attention:
-        raise InputError(f"--attention shows a learned policy's cross-attention; --run "
-                         f"{args.run} is a reference controller, which has none")
-    if (args.workers or args.ray_address) and kind != "planner":
-        raise InputError(f"--workers and --ray-address apply to --run planner; --run {args.run} "
-                         "plays its episodes in this process")
+# Evaluate's flags that only some kinds of run take (rl/runs/kinds.py: each kind's FLAGS), by
+# their dest, with how a user spells them.
+KIND_FLAGS = {"perception": "--perception", "attention": "--attention",
+              "stochastic": "--stochastic", "workers": "--workers",
+              "ray_address": "--ray-address", "episodes_from": "--episodes-from"}
+
+
+def _refuse_flags(args, kind) -> None:
+    """The flags this kind of run (a LoadedRun subclass) has no use for, refused in one line
+    before anything loads, naming the kinds that take them."""
+    from corn_drake.rl.runs.kinds import kinds_taking
+
+    for dest, flag in KIND_FLAGS.items():
+        value = getattr(args, dest)
+        if value in (None, False, 0, "") or dest in kind.FLAGS:
+            continue
+        shown = flag if value is True else f"{flag} {value}"
+        takers = " or ".join(k.WHAT for k in kinds_taking(dest))
+        raise InputError(f"{shown} applies to {takers}; --run {args.run} is {kind.WHAT}")
     if args.ray_address and not args.workers:
         raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
-    if args.episodes_from and kind != "planner":
-        raise InputError(f"--episodes-from applies to --run planner; --run {args.run} plays "
-                         "episodes 0..--episodes-1")
-    if kind == "planner" and args.record:
-        raise InputError("--run planner records no Meshcat episodes yet (its search steps the "
-                         "env outside a diagram recording); give --record 0")
-    if kind == "planner" and (args.stochastic or args.attention):
-        raise InputError("--stochastic and --attention apply to a learned policy; --run "
-                         "planner is a deterministic search")
-    if kind == "reference" and args.stochastic:
-        raise InputError(f"--stochastic samples a learned policy; --run {args.run} is a "
-                         "deterministic reference controller")
+    if args.record and not kind.RECORDS:
+        raise InputError(f"--record {args.record}: --run {args.run} ({kind.WHAT}) records no "
+                         "Meshcat episodes yet (it steps the env outside a diagram recording); "
+                         "give --record 0")
 
 
 def _evaluate(args, report_path: Path, out_dir: Path):
-    """Loads the run (rl/run_loading.py), runs the episodes and writes the report (the finished
+    """Loads the run (rl/runs/kinds.py), runs the episodes and writes the report (the finished
     episodes' if interrupted); the Meshcat that --keep-open holds, else None."""
     from corn_drake.evaluation.episodes import evaluate, success_by_group
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.run_loading import load_any_run
+    from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.storage.atomic_files import write_json
 
     # The run's own config: the task, controller and object(s) it was trained on; --task and
     # --set are overrides of it.
     loaded = load_any_run(args.run, args.checkpoint)
     run_cfg, overrides = loaded.configure(args.task, args.set)
-    if loaded.kind == "primitive" and (args.attention or args.stochastic):
-        # Refused before any env is built, in one line naming the flag.
-        flag = "--attention" if args.attention else "--stochastic"
-        raise InputError(f"{flag}: run {args.run} holds the contact-primitive policy, which "
-                         "chooses greedily and has no cross-attention; its Meshcat view "
-                         "(--record, --keep-open) shows its contact point, push and scores")
     if args.attention and not getattr(loaded.agent, "has_attention", False):
         raise InputError(f"--attention: run {args.run} holds a {loaded.policy!r} policy, which "
                          "has no cross-attention over patches (only corn, e2e, p2v-lite and rot "
@@ -227,12 +221,12 @@ def _evaluate(args, report_path: Path, out_dir: Path):
     objects = _object_specs(args, cfg)
     # Which weights were measured (checkpoint, env_steps): what `ship` checks a report against.
     extra = loaded.report_fields()
-    if loaded.kind == "distill":
-        # Evaluated through the full chain unless --perception says otherwise.
-        cfg, student_fields = loaded.student_env(cfg, args.perception)
-        extra |= student_fields
+    # A student is evaluated through the full chain unless --perception says otherwise.
+    cfg, seen = loaded.evaluated_env(cfg, args.perception)
+    extra |= seen
+    if loaded.PERCEIVES:
         print(f"student perception: {cfg.segmentation.mode} segmentation + ICP tracking "
-              f"(trained with {student_fields['trained_perception']})")
+              f"(trained with {seen['trained_perception']})")
     # After every argument is checked, before any episode: what --report holds is this run's
     # to replace, or refused (storage/output_owners.py).
     from corn_drake.storage.output_owners import check_report_owner
@@ -255,7 +249,7 @@ def _evaluate(args, report_path: Path, out_dir: Path):
 
     try:
         # --stochastic: the diagram samples the actions from a RandomSource seeded per episode.
-        if loaded.kind == "planner":
+        if loaded.RUNNER == "planner":
             from corn_drake.evaluation.planner_episodes import evaluate_planner
 
             report = evaluate_planner(loaded.agent, cfg, objects,

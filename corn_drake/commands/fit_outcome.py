@@ -58,6 +58,10 @@ def run(args) -> int:
     import torch
 
     from corn_drake.rl.primitive.outcome.fit import fit_outcome
+    from corn_drake.rl.runs.kinds import require_kind
+
+    # The proposing run through the registry of run kinds: another kind is named as such.
+    require_kind(str(args.run), "primitive", flag="RUN", needs="`fit-outcome`")
 
     from corn_drake.storage.output_owners import check_new_file
 

@@ -75,9 +75,8 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.evaluation.episodes import episode_seed
     from corn_drake.storage.atomic_files import ensure_writable, write_json
-    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.evaluation.stills import record_episode, render_frames
-    from corn_drake.run_folders.config_file import run_kind
     from corn_drake.viz.gallery import animation_picks, pick_steps, save_gif, save_png
 
     out = Path(args.out)
@@ -91,15 +90,13 @@ def run(args) -> int:
     if args.animate and not MIN_FRAME_HEIGHT <= args.frame_height <= MAX_FRAME_HEIGHT:
         raise InputError(f"--frame-height {args.frame_height}: must be {MIN_FRAME_HEIGHT} to "
                          f"{MAX_FRAME_HEIGHT} pixels")
-    if run_kind(args.run) == "primitive":
-        from corn_drake.rl.primitive.agent import load_primitive_run
-
-        cfg, agent, _ = load_primitive_run(args.run)  # painted by its location scores
-    else:
-        cfg, agent = load_run(args.run)
-        if not agent.has_attention:
-            raise InputError(f"--run {args.run} holds a {cfg.policy!r} policy, which has no "
-                             "cross-attention to paint")
+    # What the kind paints on the cloud (rl/runs/kinds.py: PAINTS): a teacher its attention, a
+    # primitive policy its location scores; a kind that paints nothing is refused.
+    loaded = load_any_run(args.run, references=False)
+    cfg, agent = loaded.config, loaded.agent
+    if loaded.PAINTS is None or (loaded.PAINTS == "attention" and not agent.has_attention):
+        raise InputError(f"--run {args.run} holds a {loaded.policy!r} policy ({loaded.WHAT}), "
+                         "which has no cross-attention or location scores to paint")
     # Evaluate samples each object's cloud with its --seed as the env seed: the same here.
     env_cfg = dataclasses.replace(cfg.env, seed=args.seed)
     known = list_objects(args.objects)
@@ -133,7 +130,7 @@ def run(args) -> int:
         entries.append(entry)
         print(f"{object_id}: {'success' if summary['success'] else 'no success'} in "
               f"{summary['steps']} steps; {path}")
-    painted = "location scores" if agent.kind == "primitive" else "attention"
+    painted = loaded.PAINTS
     write_json(out / "gallery.json", {"run": str(args.run), "policy": cfg.policy,
                                       "task": cfg.env.task.name, "objects": args.objects,
                                       "painted": painted, "episodes": entries})

@@ -78,7 +78,7 @@ def run(args) -> int:
     from corn_drake.assets.library import list_objects, load_object_spec
     from corn_drake.evaluation.planner_episodes import evaluate_planner
     from corn_drake.rl.planner.labels import LABELS_SUFFIX
-    from corn_drake.rl.run_loading import load_any_run
+    from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.storage.atomic_files import ensure_writable
     from corn_drake.storage.file_locks import locked_output
 

@@ -4,7 +4,7 @@ quoting a number its weights did not earn.
 
 A card quotes an `evaluate` report. The report must be of this run or of the shipped folder
 (its `run`), on unseen objects, without overrides, of the weights shipped: the report records
-the checkpoint file and env steps it measured (rl/run_loading.LoadedRun.report_fields), and
+the checkpoint file and env steps it measured (rl/runs/loaded.LoadedRun.report_fields), and
 both must be those of the weights packed, so a report measured at 3,200 steps cannot be paired
 with 3,520-step weights. A partial report (`complete: false`, an interrupted evaluate) is
 refused unless asked for, and then the card says `complete: false`.
@@ -16,7 +16,7 @@ cannot be checked and is accepted with a warning naming it, so the shipped cards
 the results pages still ship. Every report evaluate writes now records both.
 
 Lives below the commands so that `ship` only parses flags and prints; the run is loaded as
-`evaluate` loads it (rl/run_loading.load_any_run), so a run that ships is a run that evaluates.
+`evaluate` loads it (rl/runs/kinds.load_any_run), so a run that ships is a run that evaluates.
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ def check_report_numbers(report: dict, path: str) -> None:
 
 def check_weights_hash(report: dict, path: str, loaded, stream=None) -> None:
     """The report measured these very weights: the weights_sha256 it recorded is that of the
-    run it names (rl/run_loading.LoadedRun.weights_hash: config, checkpoint, chooser files), or
+    run it names (rl/runs/loaded.LoadedRun.weights_hash: config, checkpoint, chooser files), or
     an InputError (retrained, even to the same step count, or edited since). A report from
     before the hash was recorded gets a warning."""
     recorded = report.get("weights_sha256")
@@ -112,7 +112,7 @@ def check_weights_hash(report: dict, path: str, loaded, stream=None) -> None:
               file=stream or sys.stderr)
         return
     if Path(report["run"]).resolve() != Path(loaded.run).resolve():
-        from corn_drake.rl.run_loading import load_any_run
+        from corn_drake.rl.runs.kinds import load_any_run
 
         loaded = load_any_run(report["run"], references=False)  # the shipped folder it measured
     if loaded.weights_hash() != recorded:
@@ -168,12 +168,12 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
     (read_report's, from `report_path`); the card. Every check comes before `out` is made: a
     refused ship leaves nothing behind."""
     from corn_drake.evaluation.shipped_card import library_card_fields
-    from corn_drake.rl.run_loading import load_any_run
+    from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.storage.atomic_files import write_json
 
     out = Path(out)
     loaded = load_any_run(run, references=False)  # the run must load as evaluate loads it
-    if loaded.kind == "distill" and "perception" not in report:
+    if loaded.PERCEIVES and "perception" not in report:
         raise InputError(f"--report {report_path} records no perception chain; a student's card "
                          "quotes an evaluation through it")
     check_measured_weights(report, report_path, run, loaded.env_steps, loaded.checkpoint_file)
@@ -181,7 +181,9 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
     # Before OUT is made: the library must be on this machine to record what it holds.
     library_fields = library_card_fields(library)
     check_report_library(report, report_path, library)
-    pack = {"distill": _pack_student, "primitive": _pack_primitive}.get(loaded.kind, _pack_teacher)
+    # How each kind packs (its PACK, rl/runs/kinds.py).
+    pack = {"teacher": _pack_teacher, "student": _pack_student,
+            "primitive": _pack_primitive}[loaded.PACK]
     shipped = pack(loaded, out, library)
     episodes = len(report["episodes"])
     card = {**{k: shipped.pop(k) for k in ("policy", "task", "env_steps")},
@@ -201,7 +203,7 @@ def ship(run: str, out: str | Path, report: dict, report_path: str, library_comm
                                  "--report eval.json"),
             "train_command": train_command, "source_run": str(run),
             "actions": report.get("actions", "mean"), **shipped, **library_fields}
-    if loaded.kind == "distill":
+    if loaded.PERCEIVES:
         card["perception"] = report["perception"]
     card["bytes"] = {p.relative_to(out).as_posix(): p.stat().st_size
                      for p in sorted(out.rglob("*")) if p.is_file() and p.name != "card.json"}
