@@ -249,6 +249,11 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     assert entry["position_error"] == pytest.approx(first["position_error"], abs=1e-6)
     assert entry["primitives"] >= 1 and entry["steps_shown"] == [0, first["steps"] // 2,
                                                                  first["steps"]]
+    # Whether it ended at rest, as the report's row says (a success that tumbles through the
+    # goal is no picture of success).
+    from corn_drake.config.primitive import at_rest
+
+    assert entry["ended_at_rest"] == at_rest(entry["end_speed"]) and data["overrides"] == []
     # The object's points painted in every still it is in (an episode that ends off the table
     # ends with the object out of the camera's view).
     painted = entry["points_painted"][:-1] if first["out_of_workspace"] else \
@@ -273,6 +278,12 @@ def test_the_gallery_shows_a_shipped_primitive_policys_episode(shipped, tmp_path
     assert main(argv) == 2
     assert json.loads((gallery / "gallery.json").read_text())["run"] == "runs/someone_elses"
     assert main([*argv, "--overwrite"]) == 0
+    # --set as evaluate takes it: under the at-rest rule a success ends with the object still.
+    assert main([*argv, "--overwrite", "--set", "primitive.success_at_rest=true"]) == 0
+    rested = json.loads((gallery / "gallery.json").read_text())
+    assert rested["overrides"] == [{"key": "primitive.success_at_rest", "old": False,
+                                    "new": True}]
+    assert all(e["ended_at_rest"] for e in rested["episodes"] if e["success"])
 
 
 # An outcome model file's learning curve (rl/primitive/outcome/model.fit_network's rows).

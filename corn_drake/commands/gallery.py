@@ -44,6 +44,10 @@ def add_arguments(parser):
                         help="comma-separated object ids (default: the first 3 unseen)")
     parser.add_argument("--seed", type=seed_int, default=1000,
                         help="as evaluate's --seed: each object's first episode of that evaluation")
+    parser.add_argument("--set", action="append", default=[], dest="set", metavar="KEY=VALUE",
+                        help="as evaluate's --set: the run's env or, for a primitive run, its "
+                             "executor (e.g. primitive.success_at_rest=true: the episode goes on "
+                             "until the object rests on its goal); default: none")
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace what --out holds (default: a new or empty folder, or a "
@@ -97,8 +101,10 @@ def run(args) -> int:
     if loaded.PAINTS is None or (loaded.PAINTS == "attention" and not agent.has_attention):
         raise InputError(f"--run {args.run} holds a {loaded.policy!r} policy ({loaded.WHAT}), "
                          "which has no cross-attention or location scores to paint")
+    # --set as evaluate takes it for this kind of run (rl/runs/kinds.py: configure).
+    run_cfg, overrides = loaded.configure(None, args.set)
     # Evaluate samples each object's cloud with its --seed as the env seed: the same here.
-    env_cfg = dataclasses.replace(cfg.env, seed=args.seed)
+    env_cfg = dataclasses.replace(run_cfg.env, seed=args.seed)
     known = list_objects(args.objects)
     ids = [i for i in args.ids.split(",") if i] or list_objects(args.objects, "unseen")[:3]
     unknown = [i for i in ids if i not in known]
@@ -132,8 +138,10 @@ def run(args) -> int:
               f"{summary['steps']} steps; {path}")
     painted = loaded.PAINTS
     write_json(out / "gallery.json", {"run": str(args.run), "policy": cfg.policy,
-                                      "task": cfg.env.task.name, "objects": args.objects,
-                                      "painted": painted, "episodes": entries})
+                                      "task": env_cfg.task.name, "objects": args.objects,
+                                      "painted": painted, "episodes": entries,
+                                      "overrides": [dataclasses.asdict(change)
+                                                    for change in overrides]})
     # The earlier gallery's pictures this one did not rewrite (another object, a GIF not asked
     # for now) go: the folder shows one gallery.
     kept = {name for e in entries for name in (e["image"], e.get("animation")) if name}

@@ -98,8 +98,14 @@ def render_frames(episode: EpisodeFrames, scene_cfg, spec, picks: list[int],
 
 
 def _summary(seed: int, result) -> dict:
+    """What a gallery entry says of its episode, as a report row would: its end speed too, so
+    a picture of a success says whether the object ended at rest on its goal."""
+    from corn_drake.config.primitive import at_rest
+
+    speed = result.end_speed
     return {"seed": seed, "steps": result.steps, "success": result.success,
-            "position_error": result.status.get("position_error")}
+            "position_error": result.status.get("position_error"), "end_speed": speed,
+            "ended_at_rest": None if speed is None else bool(at_rest(speed))}
 
 
 def _painted_still(camera, positions, cloud, colours, goal_pose, marks=(),
