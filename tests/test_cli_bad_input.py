@@ -16,6 +16,7 @@ import pytest
 from corn_drake.cli import _command_modules, main
 from corn_drake.commands import bench
 from tests.fixtures import write_tiny_library
+from tests.paths import REPO_ROOT
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -45,6 +46,8 @@ def _row(argv: str, *names: str):
 
 OUT = "--out {root}/out"
 REPORT = "--report {root}/out/report.json"
+# A shipped primitive run, to reach what is checked after a run loads.
+SHIPPED_PRIMITIVE = str(REPO_ROOT / "models" / "weights" / "push_primitive")
 BENCH_REPORT = "--report {root}/out/bench.json"
 
 ROWS = [
@@ -168,6 +171,8 @@ ROWS = [
     _row("gallery --run {root}/nowhere --objects {root}/lib --out {root}/out/g",
          "{root}/nowhere/config.yaml"),
     _row("gallery --run scripted --objects {root}/lib --out {root}/out/g", "scripted/config.yaml"),
+    _row(f"gallery --run {SHIPPED_PRIMITIVE} --objects {{root}}/lib --set primitive.bogus=1 "
+         "--out {root}/out/g", "primitive.bogus"),
     _row(f"objects --source {{root}}/lib --split unseen {OUT}", "--split unseen", "--source"),
     _row("curves --run {root}/run_garbage_metrics --out {root}/out/c.png",
          "{root}/run_garbage_metrics/metrics.json"),
