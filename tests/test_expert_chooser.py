@@ -140,7 +140,7 @@ def test_a_labelled_state_is_rebuilt_from_its_pose(library):
             np.testing.assert_allclose(again[key], original[key], atol=5e-6, err_msg=key)
 
 
-def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
+def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys, monkeypatch):
     """Labels of the expert, a chooser fitted to them, its run evaluated; a round with that
     run as the learner executes its choices and labels where they lead; a rerun resumes."""
     from corn_drake.cli import main
@@ -167,7 +167,17 @@ def test_label_fit_and_evaluate_end_to_end(library, tmp_path, capsys):
     searched = sum(len(r["decisions"]) for r in records)
     assert f"states ({searched} searched" in printed
     assert f"labels of {searched + len(reached)} states" in printed
-    assert any((tmp_path / "cache").glob("*.npz"))
+    # Cached by episode: a labels file holding one of these episodes rebuilds nothing.
+    from corn_drake.rl.imitation import dataset
+    from corn_drake.storage.gz_lines import read_lines, write_lines
+
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == len(records)
+    part = tmp_path / "part.labels.jsonl.gz"
+    write_lines(part, read_lines(out.with_name("r0.labels.jsonl.gz"))[0][:2])
+    with monkeypatch.context() as m:
+        m.setattr(dataset, "_replay_context", lambda *a: pytest.fail("rebuilt a cached episode"))
+        one = dataset.file_arrays(part, library, tmp_path / "cache")
+    assert len(one["chosen"]) == sum(1 + len(d["children"]) for d in records[0]["decisions"])
     assert main(["fit-chooser", "--labels", str(out.parent), "--objects", str(library),
                  "--out-run", str(run), "--no-progress"]) == 2  # never replaces a folder
     report = tmp_path / "eval.json"
