@@ -43,9 +43,10 @@ $(STAMP): pyproject.toml setup.py
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $(STAMP)
 
-# Every test, the slow ones included (what CI runs: .ci/run).
+# Every test, the slow ones included (what CI runs: .ci/run); the 20 slowest are listed at the
+# end (docs/results/test_suite.md: what the suite costs and where).
 test: install
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=20
 
 # The quick loop while editing: skips the tests marked slow (the demo, notebooks 02-03, a
 # procedural library, training subprocesses, the fresh non-editable install).
