@@ -66,8 +66,8 @@ ROWS = [
          "metrics.json", "did not make"),
     _row(f"contact-data --objects {{root}}/lib --num-samples 8 --out {{root}}/lib",
          "{root}/lib", "manifest.json", "did not make"),
-    _row("demo --out {root}/run_no_history", "--out {root}/run_no_history", "metrics.json",
-         "the demo did not write"),
+    _row("demo --out {root}/run_no_history", "{root}/run_no_history", "metrics.json",
+         "`corn-drake demo` did not make"),
     _row("objects --source {root}/empty_meshes --out {root}/new_lib", "{root}/empty_meshes"),
     _row("objects --source {root}/nowhere --out {root}/new_lib", "{root}/nowhere"),
     # contact-data (items 4, 12, 15)

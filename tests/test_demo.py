@@ -101,6 +101,19 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
                                 for h in metrics["history"]]
     assert set(summary["unseen_objects"]) == unseen
 
+    # A rerun of the same command resumes: the library, encoder and trained policy are found,
+    # not made again; other arguments that define them are refused, naming them.
+    hulls = sorted((tmp_path / "library").glob("*/hull_*.obj"))
+    made = {p: p.stat().st_mtime_ns for p in hulls}
+    assert main(argv) == 0
+    assert {p: p.stat().st_mtime_ns for p in made} == made  # no object built again
+    resumed = _report(tmp_path / "pretrain" / "corn" / "metrics.json")
+    assert (resumed["steps"], resumed["train_seconds"]) == (  # no pretraining step again
+        pretraining["steps"], pretraining["train_seconds"])
+    again = torch.load(run / "checkpoints" / "last.pt", weights_only=False)
+    assert again["global_step"] == checkpoint["global_step"]  # no primitive trained again
+    assert main([*argv[:-2], "--eval-episodes", "2", "--num-objects", "4"]) == 2
+
 
 def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
     """The demo's "untrained" evaluation is of the weights PrimitiveTrainer starts from: built

@@ -86,30 +86,30 @@ def _check_split(num_objects: int, seed: int) -> None:
                      f"other: give --num-objects {enough} or more")
 
 
-# What the demo writes in OUT: a rerun resumes there; a folder holding anything else is not the
-# demo's to write into (issue 63, ownership: a run, shipped weights, a library of one's own).
-DEMO_ENTRIES = {"library", "contact_data", "pretrain", "policy", "eval_untrained.json",
-                "eval_trained.json", "eval_shipped.json", "eval_trained_recordings",
-                "demo_summary.json"}
-
-
-def _check_out(out: Path) -> None:
-    if not out.exists():
-        return
-    if not out.is_dir():
-        raise InputError(f"--out {out}: is a file; give a folder")
-    other = sorted(set(p.name for p in out.iterdir()) - DEMO_ENTRIES)
-    if other:
-        shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
-        raise InputError(f"--out {out}: holds {shown}, which the demo did not write; give a new "
-                         "folder (or the demo's own, to resume it)")
-
-
 def _stage(name: str, t0: float):
     print(f"[demo] {name} ({time.perf_counter() - t0:.0f} s so far)", flush=True)
 
 
 def run(args) -> int:
+    from corn_drake.run_folders.guards import lock_folder, resume_arguments
+
+    _check_split(args.num_objects, args.seed)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: is a file; give a folder")
+    with lock_folder(out):
+        # Whose folder (issue 63): a new or empty one, or this demo's own with the arguments
+        # that define what is there (a rerun resumes; --train-steps may grow).
+        resume_arguments(out, {"--seed": args.seed, "--num-objects": args.num_objects,
+                               "--num-samples": args.num_samples,
+                               "--pretrain-steps": args.pretrain_steps,
+                               "--train-steps": args.train_steps},
+                         made_by=NAME, may_grow=("--train-steps",),
+                         holds_own=lambda f: (f / "library" / "manifest.json").is_file())
+        return _run(args, out)
+
+
+def _run(args, out: Path) -> int:
     from corn_drake.assets.library import build_procedural
     from corn_drake.assets.process import ProcessConfig
     from corn_drake.config.pretraining import PretrainConfig
@@ -118,10 +118,6 @@ def run(args) -> int:
     from corn_drake.rl.runs.kinds import load_any_run
     from corn_drake.storage.atomic_files import write_json
 
-    _check_split(args.num_objects, args.seed)
-    out = Path(args.out)
-    _check_out(out)
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     print("[demo] about 7 minutes on one core (more beside other jobs); each stage's bar says "
           "what it has left", flush=True)

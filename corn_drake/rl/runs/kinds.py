@@ -191,8 +191,6 @@ class PlannerRun(LoadedRun):
 # here.
 RUN_KINDS: dict[str, type[LoadedRun]] = {k.NAME: k for k in (
     TeacherRun, StudentRun, PrimitiveRun, ReferenceRun, PlannerRun)}
-# The kinds that have weights in a run folder (what `ship` packs, `--checkpoint` reads).
-FOLDER_KINDS = tuple(name for name, k in RUN_KINDS.items() if k.PACK)
 
 
 def named_kind(run: str) -> type[LoadedRun] | None:
@@ -223,7 +221,6 @@ def load_any_run(run: str, checkpoint: str = "", references: bool = True) -> Loa
     agent with the weights of checkpoints/last.pt (prev.pt if need be) or, for a kind that
     keeps them, the kept `checkpoint` file. Without `references` a name such as `scripted` is
     not a run (it is looked for as a run folder)."""
-
     kind = run_kind_of(run, references)
     if checkpoint and not kind.CHECKPOINTS:
         takers = " or ".join(k.WHAT for k in RUN_KINDS.values() if k.CHECKPOINTS)
@@ -236,7 +233,6 @@ def require_kind(run: str, wanted: str, flag: str = "--run", needs: str = "") ->
     """The kind of run folder `run` when it is the registry's `wanted` kind (a command that
     reads only one kind: `distill` a teacher, `collect-outcomes` and `fit-outcome` a primitive
     run), else an InputError naming `flag`, what the folder is and what `needs` it."""
-
     kind = run_kind_of(run, references=False)
     if kind.NAME != wanted:
         raise InputError(f"{flag} {run} is {kind.WHAT}; {needs or 'this command'} reads "
