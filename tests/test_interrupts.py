@@ -79,7 +79,7 @@ REFUSED = [
     (["--set", "ppo.gamma=1.5"], "--set ppo.gamma: ppo.gamma must be a finite number in (0, 1]"),
     (["--set", "task.episode_steps=0"], "task.episode_steps must be a finite number >= 1, got 0"),
     (["--set", "randomization.mass=[0.5, 0.1]"], "env.randomization.mass must be [low, high]"),
-    (["--set", "rollout_steps=0"], "--rollout-steps: rollout_steps must be a finite number >= 1"),
+    (["--set", "rollout_steps=0"], "--rollout-steps: rollout_steps must be a finite number in [1, 4096]"),
 ]
 
 

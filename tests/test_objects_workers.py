@@ -35,7 +35,10 @@ def test_two_workers_build_the_serial_library_even_across_a_failure(tmp_path, ca
     serial, pool = tmp_path / "serial", tmp_path / "pool"
     assert main([*SMALL, "--out", str(serial)]) == 0
     # A file where book_000's folder goes: its build fails in a worker, after block_000 ran.
+    # The folder is this command's (its record of the arguments, as a killed first run of the
+    # same command leaves it): a folder holding anything else is not objects' to build in.
     pool.mkdir()
+    (pool / "arguments.json").write_bytes((serial / "arguments.json").read_bytes())
     (pool / "book_000").write_text("in the way")
     assert main([*SMALL, "--workers", "2", "--out", str(pool)]) == 2
     one_error_line(capsys, "object book_000", "FileExistsError")

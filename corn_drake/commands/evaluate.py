@@ -189,7 +189,8 @@ def _refuse_flags(args, kind) -> None:
             continue
         shown = flag if value is True else f"{flag} {value}"
         takers = " or ".join(k.WHAT for k in kinds_taking(dest))
-        raise InputError(f"{shown} applies to {takers}; --run {args.run} is {kind.WHAT}")
+        hint = f": {kind.HINTS[dest]}" if dest in kind.HINTS else ""
+        raise InputError(f"{shown} applies to {takers}; --run {args.run} is {kind.WHAT}{hint}")
     if args.ray_address and not args.workers:
         raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
     if args.record and not kind.RECORDS:

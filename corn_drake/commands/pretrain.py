@@ -85,8 +85,11 @@ def run(args) -> int:
     list_shards(args.data, "train")  # a missing or empty dataset fails before OUT is touched
     out = Path(args.out)
     with lock_folder(out):
+        # Without a record (a folder from before records named their command), a pretraining
+        # output is known by its merged metrics or a model's checkpoints folder.
         resume_arguments(out, {"--data": os.path.normpath(args.data)}, made_by=NAME,
-                         holds_own=lambda f: (f / "metrics.json").is_file())
+                         holds_own=lambda f: (f / "metrics.json").is_file() or any(
+                             (f / m / "checkpoints").is_dir() for m in ("corn", "pointnet")))
         return _pretrain(args, out)
 
 

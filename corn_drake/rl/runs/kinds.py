@@ -89,6 +89,9 @@ class PrimitiveRun(LoadedRun):
     NAME = "primitive"
     WHAT = "a contact-primitive run (`corn-drake train --policy primitive`)"
     CHECKPOINTS = True
+    HINTS = {"attention": "it has no cross-attention; its Meshcat view (--record, --keep-open) "
+                          "shows its contact point, push and location scores",
+             "stochastic": "it chooses greedily"}
     PAINTS = "location scores"
     PACK = "primitive"
 

@@ -39,7 +39,7 @@ class LoadedRun:
     that plays it ("diagram": evaluation/episodes.py, "planner": evaluation/planner_episodes.py);
     PAINTS, what `gallery` paints on its cloud (None: nothing); PACK, how `ship` packs its
     weights (None: it has none); PERCEIVES, whether it sees through the cameras (its report and
-    card name the perception chain)."""
+    card name the perception chain); HINTS, what a refusal of a flag it does not take adds."""
 
     NAME: ClassVar[str] = ""
     WHAT: ClassVar[str] = ""
@@ -52,6 +52,7 @@ class LoadedRun:
     PAINTS: ClassVar[str | None] = None
     PACK: ClassVar[str | None] = None
     PERCEIVES: ClassVar[bool] = False
+    HINTS: ClassVar[dict[str, str]] = {}
 
     run: str
     config: Any
