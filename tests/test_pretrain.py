@@ -39,15 +39,19 @@ def test_patch_label_is_any_point_in_patch():
 def test_augmentation_moves_cloud_and_gripper_together():
     g = torch.Generator().manual_seed(0)
     cfg = PretrainConfig(point_noise_std=0.0)
-    pts = torch.rand(4, 512, 3)
-    q = torch.nn.functional.normalize(torch.randn(4, 4), dim=-1)
-    pose = torch.cat([torch.rand(4, 3), q], -1)
+    # Inputs from their own generator: drawn from torch's global one, they depended on which
+    # tests ran before (a float32 distance then missed 1e-5 by 2e-7 in one order of the suite).
+    inputs = torch.Generator().manual_seed(1)
+    pts = torch.rand(4, 512, 3, generator=inputs)
+    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=inputs), dim=-1)
+    pose = torch.cat([torch.rand(4, 3, generator=inputs), q], -1)
     norm = InputNormalization()
     new_pts, new_hand = augment(pts, pose, cfg, g, norm)
     # Distances from the gripper to every point are preserved (a rigid motion of both).
     before = torch.cdist(norm.points(pose[:, None, :3]), norm.points(pts))
     after = torch.cdist(new_hand[:, None, :3], new_pts)
-    torch.testing.assert_close(before, after, atol=1e-5, rtol=0)
+    # float32 distances of up to ~2 m after a rotation and a shift: ~1e-5 of rounding is float32's
+    torch.testing.assert_close(before, after, atol=5e-5, rtol=0)
     # The hand's rotation turned by the same yaw as the cloud.
     R0 = quat_wxyz_to_matrix(q)
     c0, c1 = new_hand[:, 3:6], new_hand[:, 6:9]
