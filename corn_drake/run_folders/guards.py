@@ -179,9 +179,11 @@ def resume_arguments(folder: str | os.PathLike, requested: Mapping[str, Any], *,
     if recorded is None and legacy is not None:
         recorded = legacy(folder)
     if recorded is None and not (holds_own is not None and holds_own(folder)):
+        from corn_drake.storage.output_owners import describe_folder
+
         found = sorted(set(os.listdir(folder)) - {LOCK_NAME, ARGUMENTS_NAME})
         if found:
-            raise InputError(f"{folder}: holds {describe_contents(folder, found)}, which "
+            raise InputError(f"{folder}: holds {describe_folder(folder, found)}, which "
                              f"`corn-drake {made_by}` did not make; it writes only into a new "
                              "or empty folder or one it made: give another folder")
     if recorded is not None:
@@ -201,18 +203,6 @@ def _legacy_maker(recorded: Mapping[str, Any]) -> str | None:
     if "--data" in recorded or set(recorded) == {"--objects"}:
         return "pretrain"
     return None
-
-
-def describe_contents(folder: Path, found: list[str]) -> str:
-    """What a folder holds, for a refusal: what it recognisably is, else its first entries."""
-    if (folder / "card.json").is_file():
-        return "shipped weights (card.json)"
-    if (folder / "config.yaml").is_file():
-        return "a run (config.yaml)"
-    if (folder / "manifest.json").is_file():
-        return "an object library or dataset (manifest.json)"
-    shown = ", ".join(found[:3]) + (f" and {len(found) - 3} more" if len(found) > 3 else "")
-    return f"{len(found)} entries of something else ({shown})"
 
 
 def refuse_changed_config(folder: str | os.PathLike, recorded_path: str | os.PathLike, cfg: Any,

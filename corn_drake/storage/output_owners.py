@@ -60,14 +60,24 @@ def check_folder_owner(out: Path, source: str, overwrite: bool, flag: str = "--o
             return
         what = (f"the weights shipped from {shipped_from}" if shipped_from else
                 "shipped weights whose card names no source_run")
-    elif (out / "manifest.json").is_file():
-        what = "an object library"
-    elif (out / "config.yaml").is_file():
-        what = "a run folder"
     else:
-        what = f"{len(entries)} files of something else"
+        what = describe_folder(out, sorted(p.name for p in entries))
     raise InputError(f"{flag} {out}: holds {what}; give a new folder, or --overwrite to "
                      f"replace it with the weights of {source}")
+
+
+def describe_folder(folder: Path, names: list[str]) -> str:
+    """What a folder holding `names` is, for a refusal to write there: shipped weights, an
+    object library (or dataset), a run, else its first entries. One description for every
+    command's output check (this module's and run_folders.guards')."""
+    if (folder / CARD).is_file():
+        return "shipped weights (card.json)"
+    if (folder / "manifest.json").is_file():
+        return "an object library or dataset (manifest.json)"
+    if (folder / "config.yaml").is_file():
+        return "a run (config.yaml)"
+    shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return f"{len(names)} files of something else ({shown})"
 
 
 def check_new_file(path: Path | None, overwrite: bool, flag: str = "--out") -> None:

@@ -29,7 +29,7 @@ from corn_drake.errors import InputError
 
 # Bump when what a row or state holds changes (2: reached states; 3: cached by episode).
 CACHE_VERSION = 3
-KEY_CHARS = 20  # of a labels file's sha256, naming its cached arrays
+KEY_CHARS = 20  # of an episode's sha256 (episode_key), naming its cached arrays
 
 
 def label_files(paths: list[Path]) -> list[Path]:
