@@ -134,29 +134,94 @@ def test_no_circle_between_modules():
     assert cycle == []
 
 
-# A room a newcomer reads at a glance (issue 52): rl/ holds shared helpers at its top and one
-# folder per role (envs/, ppo/, primitive/, workers/), none past a dozen modules.
+# A room a newcomer reads at a glance (issues 52, 62): every folder holds one role and at most a
+# dozen modules (its __init__.py not counted), split by role where it grows past that; rl/ keeps
+# only shared helpers at its top.
+MAX_FOLDER_MODULES = 12
 MAX_RL_TOP_MODULES = 10
-MAX_RL_FOLDER_MODULES = 12
 
 
 def folder_sizes() -> dict[str, int]:
-    """{folder relative to the package: .py modules directly inside it}, data folders excluded."""
+    """{folder relative to the package: .py modules directly inside it, __init__.py not
+    counted}, data folders excluded; the package root is "."."""
     sizes = {}
     for folder in [PACKAGE, *sorted(p for p in PACKAGE.rglob("*") if p.is_dir())]:
         rel = folder.relative_to(PACKAGE).as_posix()
         if "_data" in rel or "__pycache__" in rel:
             continue
-        sizes[rel] = len(list(folder.glob("*.py")))
+        sizes[rel] = len([p for p in folder.glob("*.py") if p.name != "__init__.py"])
     return sizes
 
 
-def test_rl_is_split_into_rooms_none_over_a_dozen_modules():
+def oversized(sizes: dict[str, int], limit: int = MAX_FOLDER_MODULES) -> dict[str, int]:
+    # The root has its own list (ROOT_MODULES); every other folder has the limit.
+    return {f: n for f, n in sizes.items() if f != "." and n > limit}
+
+
+def test_every_folder_holds_at_most_a_dozen_modules():
     sizes = folder_sizes()
+    assert oversized(sizes) == {}
     assert sizes["rl"] <= MAX_RL_TOP_MODULES, f"rl/ has {sizes['rl']} modules at its top"
-    too_big = {f: n for f, n in sizes.items() if f.startswith("rl/") and n > MAX_RL_FOLDER_MODULES}
-    assert too_big == {}
-    assert len([f for f in sizes if f.startswith("rl/")]) >= 4  # the rooms exist (not vacuous)
+    # Not vacuous: the count sees real folders, and a lower limit flags the biggest.
+    assert len(sizes) >= 20 and oversized(sizes, limit=3) != {}
+
+
+# rl/'s rooms ranked (issue 62): an import from one room of rl/ to another runs to a lower rank,
+# imports inside functions counted, so no two rooms lean on each other and each can be read
+# knowing only those below it. "" is rl/'s top (the shared helpers). Rooms of one rank do not
+# import each other.
+RL_ROOM_RANKS = {
+    "envs": 0,          # the Drake envs the policies act in
+    "": 1,              # device, normalisation, run paths and progress: what every trainer shares
+    "ppo": 2,           # the dense teacher's agent and PPO update
+    "primitive": 2,     # the contact-primitive agent, TD3, its outcome and value choosers
+    "planner": 3,       # the 6D expert's search over a primitive run's candidates
+    "workers": 3,       # Ray workers that collect segments or primitives for the trainers
+    "imitation": 4,     # fitting the value chooser to the expert's labels
+    "training": 5,      # the trainers, which may spread their episodes over workers
+    "runs": 6,          # loading any kind of run for the commands
+}
+
+
+def rl_room(module: str) -> str | None:
+    """'corn_drake.rl.ppo.agent' -> 'ppo'; 'corn_drake.rl.device' -> ''; None outside rl/."""
+    parts = module.split(".")
+    if len(parts) < 2 or parts[1] != "rl":
+        return None
+    return parts[2] if len(parts) > 3 or (len(parts) == 3 and (PACKAGE / "rl" / parts[2]).is_dir()) \
+        else ""
+
+
+def rl_imports_against_rank(ranks: dict[str, int]) -> list[str]:
+    bad = []
+    for path, _ in _modules():
+        name = ".".join(("corn_drake", *path.relative_to(PACKAGE).with_suffix("").parts))
+        room = rl_room(name.removesuffix(".__init__") if path.name == "__init__.py" else name)
+        if room is None:
+            continue
+        for line, target in _imports(path):
+            other = rl_room(target)
+            if other is not None and other != room and ranks[other] >= ranks[room]:
+                bad.append(f"{path.relative_to(PACKAGE)}:{line} (rl/{room}, rank {ranks[room]}) "
+                           f"imports {target} (rl/{other}, rank {ranks[other]})")
+    return bad
+
+
+def test_every_room_of_rl_has_a_rank():
+    rooms = {p.name for p in (PACKAGE / "rl").iterdir() if p.is_dir() and p.name != "__pycache__"}
+    assert rooms | {""} == set(RL_ROOM_RANKS), "rank new rl/ rooms in RL_ROOM_RANKS"
+
+
+def test_rl_rooms_import_only_lower_ranks_function_level_imports_counted():
+    assert rl_imports_against_rank(RL_ROOM_RANKS) == []
+
+
+def test_the_rank_check_sees_a_function_level_import():
+    # Ranking workers above the trainers must flag the trainers' imports of workers, which are
+    # inside functions (Ray is imported only when a run asks for workers).
+    swapped = dict(RL_ROOM_RANKS, workers=6, runs=7)
+    flagged = rl_imports_against_rank(swapped)
+    assert any(line.startswith("rl/training/") and "rl.workers" in line for line in flagged)
 
 
 def _imports_experiments(path: Path) -> list[int]:

@@ -14,7 +14,7 @@ from corn_drake.bench import scale
 from corn_drake.cli import main
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
-from corn_drake.rl.ppo.trainer import Trainer, to_cpu
+from corn_drake.rl.training.ppo_trainer import Trainer, to_cpu
 from tests.waiting import wait_until
 
 WORKERS, ENVS_PER_WORKER, ROLLOUT, UPDATES = [1, 2], 1, 4, 1
@@ -225,7 +225,7 @@ def test_scale_refuses_a_ray_address_nothing_answers_at(tmp_path, capsys, addres
 
 def test_scale_ray_address_reaches_every_runs_trainer_config(tmp_path, monkeypatch):
     """--ray-address is checked (something answers there: here a plain socket) and goes into
-    the trainer's config (the Trainer joins that cluster: rl/ppo/trainer.py); no Ray started."""
+    the trainer's config (the Trainer joins that cluster: rl/training/ppo_trainer.py); no Ray started."""
     import socket
 
     from corn_drake.bench import timed_training

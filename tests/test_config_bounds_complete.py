@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-import corn_drake.config as config_package
+import corn_drake
 from corn_drake.cli import main
 from corn_drake.config.bounds import (check_bounds, check_spec, declared_bounds,
                                       declared_relations, describe, value_at, within)
@@ -35,17 +35,28 @@ NOT_CONFIGS = {"Change"}  # overrides.Change: what an override changed, for prin
 
 
 def _config_classes() -> dict[str, type]:
+    """Every dataclass of corn_drake.config, and every dataclass named *Config elsewhere in the
+    package (the objects' and the contact data's settings live beside their code)."""
     classes = {}
-    for module in pkgutil.iter_modules(config_package.__path__):
-        mod = importlib.import_module(f"corn_drake.config.{module.name}")
+    for module in pkgutil.walk_packages(corn_drake.__path__, "corn_drake."):
+        in_config = module.name.startswith("corn_drake.config.")
+        if "._data" in module.name or module.ispkg:
+            continue
+        mod = importlib.import_module(module.name)
         for name, obj in vars(mod).items():
             if (inspect.isclass(obj) and dc.is_dataclass(obj) and obj.__module__ == mod.__name__
-                    and name not in NOT_CONFIGS):
+                    and name not in NOT_CONFIGS and (in_config or name.endswith("Config"))):
                 classes[obj.__qualname__] = obj
     return dict(sorted(classes.items()))
 
 
 CLASSES = _config_classes()
+
+
+def test_the_walk_finds_the_configs_outside_config():
+    """Not vacuous: the settings that live beside their code are among the walked classes."""
+    assert {"ProcessConfig", "DropConfig", "HullConfig", "DecompositionConfig",
+            "ContactDataConfig", "TrainConfig"} <= set(CLASSES)
 FIELDS = [(cls, field.name) for cls in CLASSES.values() for field in dc.fields(cls)]
 
 

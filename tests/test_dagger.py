@@ -1,4 +1,4 @@
-"""DAgger distillation (rl/dagger.py, `corn-drake distill`): the KL loss, learning on a fixed
+"""DAgger distillation (rl/training/dagger.py, `corn-drake distill`): the KL loss, learning on a fixed
 dataset, what a BPTT window's gradient reaches, a killed run's resume, and bad input.
 
 The slow tests train a tiny `state` teacher (it only labels states, so it needs no encoder) and
@@ -17,7 +17,7 @@ from corn_drake.contract import ACTION_DIM, student_observation_shapes
 from corn_drake.storage.checkpoint_files import load_checkpoint
 from corn_drake.nn.encoder_files import make_policy_encoder, save_encoder
 from corn_drake.nn.student import StudentPolicy
-from corn_drake.rl.dagger import gaussian_kl, window_loss, window_terms
+from corn_drake.rl.training.dagger import gaussian_kl, window_loss, window_terms
 
 POINTS = 64
 

@@ -121,7 +121,7 @@ def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
     seeding would make the demo compare against another policy)."""
     from corn_drake.config.diagram_files import load_primitive_env_config
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 
     encoder = data_dir("models") / "weights" / "push_corn" / "encoder.pt"
     cfg = PrimitiveTrainConfig(env=load_primitive_env_config(TASK), envs_per_worker=1, seed=7)

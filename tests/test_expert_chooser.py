@@ -13,9 +13,9 @@ import pytest
 import torch
 
 from corn_drake.errors import InputError
-from corn_drake.rl.imitation.features import BASE_FEATURES, PRIOR_COLUMN
+from corn_drake.rl.primitive.value_chooser.features import BASE_FEATURES, PRIOR_COLUMN
 from corn_drake.rl.imitation.fit import agreement, fit_value
-from corn_drake.rl.imitation.value_model import ValueNet, choose_index
+from corn_drake.rl.primitive.value_chooser.value_model import ValueNet, choose_index
 
 TINY = ["--set", "planner.random_motions=0", "--set", "planner.beam=1", "--set",
         "primitive.max_primitives=2"]

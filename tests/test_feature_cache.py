@@ -1,4 +1,5 @@
-"""The frozen-feature cache of teacher training (rl/ppo/trainer.py, TeacherAgent.features), counted.
+"""The frozen-feature cache of teacher training (rl/training/ppo_trainer.py,
+TeacherAgent.features), counted.
 
 A frozen encoder (`corn`, `pn`, `p2v-lite`, `rot`) gives the same features for the same
 observation, so the trainer computes them once when it collects a batch and every PPO epoch
@@ -20,7 +21,7 @@ from corn_drake.nn.encoder_files import make_policy_encoder
 from corn_drake.rl.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
 from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.ppo.segments import SegmentCollector
-from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.training.ppo_trainer import Trainer
 from corn_drake.rl.envs.vec_env import StepResult
 
 NUM_POINTS = 64  # enough for 16 patches of 32; the agent reads any cloud size

@@ -123,7 +123,7 @@ def _cfg(**changes) -> PrimitiveTrainConfig:
 
 def test_a_finished_episode_comes_back_with_its_reached_poses_as_goals(tmp_path):
     from corn_drake.rl.primitive.collection import Exploration
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 
     trainer = PrimitiveTrainer(_cfg(), tmp_path, load_encoder("corn", ENCODER))
     explore = Exploration(random=True, temperature=0.1, motion_noise=0.3)
@@ -157,7 +157,7 @@ def test_a_finished_episode_comes_back_with_its_reached_poses_as_goals(tmp_path)
 
 
 def test_a_hindsight_run_stores_the_copies_and_counts_only_its_primitives(tmp_path):
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 
     trainer = PrimitiveTrainer(_cfg(), tmp_path, load_encoder("corn", ENCODER))
     metrics = trainer.train(progress=False)
@@ -174,7 +174,7 @@ def test_an_at_rest_runs_collector_relabels_with_the_final_speeds(tmp_path):
     (whose only goal is the pose it led to) are one copy three times: all of them succeed or
     none, as that push's one final speed decides (a missing speed would be refused)."""
     from corn_drake.rl.primitive.collection import Exploration
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 
     cfg = _cfg(primitive=PrimitiveConfig(max_primitives=2, success_at_rest=True))
     trainer = PrimitiveTrainer(cfg, tmp_path, load_encoder("corn", ENCODER))

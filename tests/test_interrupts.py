@@ -62,7 +62,7 @@ def test_a_signalled_training_run_ends_in_one_line_and_resumes(tmp_path, sig, wo
     # (in process and without Ray: the command would train on to its million steps).
     import dataclasses
 
-    from corn_drake.rl.ppo.trainer import Trainer
+    from corn_drake.rl.training.ppo_trainer import Trainer
     from corn_drake.run_folders.config_file import load_run_config
 
     cfg = dataclasses.replace(load_run_config(run), total_steps=kept + 32, workers=0)

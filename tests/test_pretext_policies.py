@@ -20,10 +20,10 @@ from corn_drake.nn.encoder_files import make_policy_encoder, save_encoder
 from corn_drake.nn.policy import CrossAttentionActorCritic
 from corn_drake.pretraining.pretext import PretextPretrainer
 from corn_drake.rl.ppo.agent import TeacherAgent
-from corn_drake.rl.checkpoints import load_run
+from corn_drake.rl.ppo.teacher_runs import load_run
 from corn_drake.rl.pretrained_encoders import MIN_PRETEXT_SKILL, load_encoder
 from corn_drake.rl.ppo.segments import SegmentCollector
-from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.training.ppo_trainer import Trainer
 from corn_drake.run_folders.config_file import write_run_config
 from tests.fixtures import write_tiny_library
 from tests.test_feature_cache import NUM_POINTS, RandomEnvs

@@ -14,7 +14,7 @@ import pytest
 
 from corn_drake.cli import main
 from corn_drake.package_data import data_dir
-from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 from corn_drake.rl.primitive.replay import ReplayBuffer
 from corn_drake.storage.checkpoint_files import load_checkpoint
 from tests.fixtures import one_error_line

@@ -16,7 +16,7 @@ from corn_drake.nn.threads import torch_threads
 from corn_drake.package_data import data_dir
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.rl.primitive.collection import Exploration, PrimitiveCollector
-from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 from corn_drake.rl.envs.vec_env import EnvBatch
 from tests.waiting import wait_until
 

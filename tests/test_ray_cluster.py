@@ -20,7 +20,7 @@ import pytest
 import torch
 
 from corn_drake.config.training import TrainConfig
-from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.training.ppo_trainer import Trainer
 from tests.fixtures import write_loadable_library
 from tests.test_segment_workers import _WorkersInProcess
 from tests.waiting import wait_until
@@ -252,7 +252,7 @@ def test_primitive_and_distill_workers_on_two_nodes_without_the_drivers_files(
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.config.teacher import TeacherDiagramConfig
     from corn_drake.rl.envs.vec_env import EnvFactory
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
     from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
     from tests.test_primitive_workers import ENCODER, load_encoder
 

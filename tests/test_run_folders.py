@@ -79,7 +79,7 @@ def test_train_refuses_changed_arguments_before_writing_and_extends_with_more_st
 # --- item 11: a corrupt latest checkpoint falls back to the previous one ----------------------
 def test_corrupt_checkpoint_falls_back_to_the_previous_then_is_named(
         state_run, tmp_path, capsys):
-    from corn_drake.rl.ppo.trainer import Trainer
+    from corn_drake.rl.training.ppo_trainer import Trainer
 
     run = tmp_path / "run"
     shutil.copytree(state_run, run)

@@ -14,7 +14,7 @@ from corn_drake.config.training import TrainConfig
 from corn_drake.nn.threads import torch_threads
 from corn_drake.rl.envs.vec_env import EnvBatch
 from corn_drake.rl.ppo.segments import SegmentCollector, concat_segments
-from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.training.ppo_trainer import Trainer
 from corn_drake.rl.run_progress import run_env_factory
 from tests.waiting import wait_until
 

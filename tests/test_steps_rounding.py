@@ -9,7 +9,7 @@ def test_the_steps_a_ppo_run_rounds_to_are_said(tmp_path, capsys):
     says the count trained, and the run's step count is that count."""
     import json
 
-    from corn_drake.rl.ppo.trainer import steps_trained
+    from corn_drake.rl.training.ppo_trainer import steps_trained
 
     assert steps_trained(8, 0, 128) == 128 and steps_trained(256, 0, 128) == 256
     assert steps_trained(300, 256, 128) == 384 and steps_trained(100, 128, 128) == 128

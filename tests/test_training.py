@@ -13,7 +13,7 @@ import torch
 
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import TrainConfig
-from corn_drake.rl.ppo.trainer import Trainer
+from corn_drake.rl.training.ppo_trainer import Trainer
 from corn_drake.rl.envs.vec_env import EnvFactory
 from tests.waiting import wait_until
 
@@ -64,7 +64,8 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
 
 def test_snapshots_keep_the_checkpoint_of_each_multiple_and_load_by_name(tmp_path):
     from corn_drake.errors import MissingInputError
-    from corn_drake.rl.checkpoints import load_run_with_step, run_snapshots, snapshot_path
+    from corn_drake.rl.checkpoints import run_snapshots, snapshot_path
+    from corn_drake.rl.ppo.teacher_runs import load_run_with_step
     from corn_drake.run_folders.config_file import write_run_config
 
     cfg = _small_cfg(160)  # 5 updates of 32 steps
@@ -303,7 +304,7 @@ def test_ray_workers_share_the_object_rounds_of_an_in_process_batch(tmp_path):
 
 def test_a_run_started_from_another_carries_its_agent_and_refuses_another_network(tmp_path, capsys):
     from corn_drake.cli import main
-    from corn_drake.rl.checkpoints import load_run
+    from corn_drake.rl.ppo.teacher_runs import load_run
 
     source = tmp_path / "push"
     assert main(["train", "--policy", "state", "--task", "push", "--steps", "32",

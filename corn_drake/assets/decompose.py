@@ -15,6 +15,14 @@ from corn_drake.storage.atomic_files import save_npz
 
 @dataclasses.dataclass
 class DecompositionConfig:
+    # CoACD's own ranges: a concavity threshold in (0, 1], at least one hull and one search step,
+    # preprocess "off" / "on" / "auto".
+    BOUNDS = {"threshold": "(0, 1]", "max_convex_hull": "[1, 1024]", "mcts_iterations": ">= 1",
+              "mcts_max_depth": ">= 1", "mcts_nodes": ">= 1", "resolution": ">= 1",
+              "preprocess_mode": "one of off|on|auto", "seed": "seed", "max_union_ratio": ">= 1",
+              "retry_threshold": "(0, 1]", "retry_mcts_iterations": ">= 1",
+              "retry_mcts_max_depth": ">= 1"}
+
     # The authors: threshold 0.05, <= 16 hulls. Fast MCTS settings measured here keep one mesh to
     # a few seconds; preprocessing off because every mesh reaching here is already watertight.
     threshold: float = 0.05

@@ -33,6 +33,9 @@ DRAKE_PLANE_MIN_NORMAL = 1e-10  # Drake's Plane: |n| below this throws (geometry
 
 @dataclasses.dataclass
 class HullConfig:
+    BOUNDS = {"tolerances": "vector > 0", "face_margin": ">= 1", "compliant_modulus": "> 0",
+              "resolution_hint": "> 0"}
+
     # Repair tolerances (m), tried in order until Drake accepts the hull. The objects are 5-10 cm
     # across, so even the last one moves the contact surface by a small fraction of a millimetre.
     tolerances: tuple[float, ...] = (1e-5, 1e-4, 3e-4)

@@ -21,6 +21,7 @@ from typing import Callable
 
 import numpy as np
 
+from corn_drake.config.bounds import check_bounds
 from corn_drake.assets.build_pool import in_plan_order
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
 from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
@@ -340,6 +341,7 @@ def build_procedural(out: str | Path, num: int, seed: int, cfg: ProcessConfig | 
     from tqdm import tqdm
 
     out, cfg = Path(out), cfg or ProcessConfig()
+    check_bounds(cfg)  # a hand-built ProcessConfig meets the rules a flag's value does
     if split not in (None, "train", "unseen"):
         raise InputError(f"split must be 'train' or 'unseen', got {split!r}")
     planned = planned_procedural(num)
@@ -435,6 +437,7 @@ def ingest_folder(source: str | Path, out: str | Path, seed: int = 0,
     from corn_drake.assets.mesh_scale import size_rule
 
     source, out, cfg = Path(source), Path(out), cfg or ProcessConfig()
+    check_bounds(cfg)
     if not source.is_dir():
         raise MissingInputError(f"mesh folder not found: {source}")
     files = find_mesh_files(source)

@@ -11,14 +11,19 @@ import trimesh
 
 from corn_drake.assets.decompose import DecompositionConfig, decompose, union_volume
 from corn_drake.assets.hulls import HullConfig, loadable_hull, obj_text
-from corn_drake.assets.ingest import Rejected
+from corn_drake.assets.ingest import UNIT_SYMBOLS, Rejected
 from corn_drake.assets.stable_poses import DropConfig, find_stable_poses
+from corn_drake.config.bounds import one_of
 from corn_drake.storage.atomic_files import save_npy, write_text
 from corn_drake.scene.objects import ObjectSpec
 
 
 @dataclasses.dataclass
 class ProcessConfig:
+    BOUNDS = {"radius": "range > 0", "keep_size_radius": "range > 0",
+              "unit": one_of(("auto", *UNIT_SYMBOLS)), "density": "> 0",
+              "cloud_points": "[1, 65536]", "thin_ratio": ">= 1"}
+
     # Object radius range (m) from the authors' code's domain randomisation (the paper itself
     # gives a 0.1-0.3 m scale); contact data uses its own U(0.04, 0.12) (contact/generate.py).
     radius: tuple[float, float] = (0.05, 0.10)

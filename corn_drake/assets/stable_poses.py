@@ -45,6 +45,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from scipy.spatial import ConvexHull, Delaunay, QhullError
 
+from corn_drake.config.bounds import one_of
+from corn_drake.config.choices import COMPLIANT_BODIES
 from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
@@ -58,6 +60,17 @@ GRID_DECIMALS = 9
 
 @dataclasses.dataclass
 class DropConfig:
+    # The rule of each field (config/bounds.py): tolerances and margins are lengths or angles
+    # that a zero or negative value would turn into "every pose" or "no pose".
+    BOUNDS = {"drops": "[1, 100000]", "canonical_fraction": "[0, 1]", "height": "> 0",
+              "max_time": "> 0", "still_steps": ">= 1", "still_linear": "> 0",
+              "still_angular": "> 0", "support_tolerance": "> 0", "duplicate_angle": "> 0",
+              "face_tolerance": "> 0", "vertex_margin": "> 0", "stable_margin": ">= 0",
+              "face_angle": "(0, 3.15]", "verify_time": "> 0", "verify_position": "> 0",
+              "verify_angle": "> 0", "second_time_step": "> 0",
+              "second_compliant_body": one_of(COMPLIANT_BODIES), "second_position": "> 0",
+              "second_angle": "> 0"}
+
     drops: int = 128
     canonical_fraction: float = 0.2
     height: float = 0.2

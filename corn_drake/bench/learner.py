@@ -43,7 +43,7 @@ def run(args) -> dict:
     from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.device import training_device
-    from corn_drake.rl.ppo.trainer import Trainer
+    from corn_drake.rl.training.ppo_trainer import Trainer
     from corn_drake.rl.pretrained_encoders import make_encoder
 
     env_cfg = load_teacher_config(args.task)

@@ -1,7 +1,7 @@
 """`corn-drake bench scale`: training steps/s of the Ray path at each worker count, and efficiency.
 
-For each worker count W the real trainer (corn_drake/rl/ppo/trainer.py) trains with W Ray rollout
-workers of --envs-per-worker envs each (weak scaling: the batch grows with W), each worker
+For each worker count W the real trainer (corn_drake/rl/training/ppo_trainer.py) trains with W
+Ray rollout workers of --envs-per-worker envs each (weak scaling: the batch grows with W), each worker
 stepping its own envs for the whole rollout segment with a CPU copy of the policy
 (rl/workers/segment_workers.py), the learner's PPO update on --device, a randomly initialised encoder
 (timing only). Rates are measured on the timed updates only (bench/timed_training.py).

@@ -82,7 +82,7 @@ def run_trainer(cfg, timer, warmup_updates: int,
     import tempfile
 
     from corn_drake.rl.pretrained_encoders import make_encoder
-    from corn_drake.rl.ppo.trainer import Trainer
+    from corn_drake.rl.training.ppo_trainer import Trainer
 
     with tempfile.TemporaryDirectory(prefix="bench_trainer_") as out:
         trainer = Trainer(cfg, out, make_encoder(cfg.policy))

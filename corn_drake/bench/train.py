@@ -1,7 +1,7 @@
 """`corn-drake bench train`: training steps/s of the real PPO trainer vs bare physics, same run.
 
-The trainer (corn_drake/rl/ppo/trainer.py, in-process envs, the push task by default, a randomly
-initialised encoder) runs a few updates; then the bare plant of the same scene is driven by
+The trainer (corn_drake/rl/training/ppo_trainer.py, in-process envs, the push task by default, a
+randomly initialised encoder) runs a few updates; then the bare plant of the same scene is driven by
 recorded torques exactly as `bench sim` does it (bench/bare_physics.py bare_physics_rate), on
 one of the trainer's own envs. `train_ratio` = train / bare is the fraction of the physics-only
 speed that training keeps (issue 14 asks >= 0.8).

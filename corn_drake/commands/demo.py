@@ -204,7 +204,7 @@ def untrained_agent(cfg, encoder_file: Path):
     """The weights the demo's training starts from (a resumed demo's trainer holds trained
     ones), in eval mode."""
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive.trainer import initial_agent
+    from corn_drake.rl.training.primitive_trainer import initial_agent
 
     return initial_agent(cfg, load_encoder("corn", encoder_file, True)).eval()
 
@@ -216,7 +216,7 @@ def train_policy(run_dir: Path, cfg, encoder_file: Path) -> dict:
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.rl.checkpoints import keep_encoder_copy
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     with ResumableRun.open(run_dir, PrimitiveTrainConfig) as run_folder:

@@ -1,4 +1,4 @@
-"""`corn-drake distill`: DAgger distillation of a trained teacher into the student (rl/dagger.py).
+"""`corn-drake distill`: DAgger distillation of a trained teacher into the student (rl/training/dagger.py).
 
 The teacher is a PPO run (`corn-drake train`; a primitive run, trained with TD3, is no teacher
 here); the student (camera point cloud -> CORN encoder -> GRU -> action) learns from it with
@@ -186,7 +186,7 @@ def run(args) -> int:
     from corn_drake.errors import InputError
     from corn_drake.nn.student_io import student_from_encoder
     from corn_drake.nn.threads import torch_threads
-    from corn_drake.rl.dagger import DaggerTrainer
+    from corn_drake.rl.training.dagger import DaggerTrainer
     from corn_drake.rl.pretrained_encoders import check_pretrained
     from corn_drake.run_folders.config_file import run_config_path
     from corn_drake.run_folders.inputs_record import record_inputs, refuse_changed_inputs
@@ -230,7 +230,7 @@ def run(args) -> int:
 
 def teacher_weights_hash(run: str) -> str:
     """rl/runs/loaded.weights_hash of the teacher run's config and last.pt."""
-    from corn_drake.rl.runs.loaded import weights_hash
+    from corn_drake.rl.checkpoints import weights_hash
 
     return weights_hash(Path(run), Path(run) / "checkpoints" / "last.pt")
 

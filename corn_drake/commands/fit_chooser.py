@@ -74,7 +74,7 @@ def run(args) -> int:
 
     from corn_drake.rl.imitation.dataset import label_files, load_label_arrays
     from corn_drake.rl.imitation.fit import agreement, fit_value, split_objects
-    from corn_drake.rl.imitation.value_model import MODEL_FILE, save_value_model
+    from corn_drake.rl.primitive.value_chooser.value_model import MODEL_FILE, save_value_model
     from corn_drake.rl.planner.sources import policy_run_folder
     from corn_drake.rl.primitive.outcome.model import MODEL_FILE as OUTCOME_FILE
     from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts

@@ -1,4 +1,4 @@
-"""`corn-drake train`: the teacher policy, with PPO (corn_drake/rl/ppo/trainer.py) or, for
+"""`corn-drake train`: the teacher policy, with PPO (corn_drake/rl/training/ppo_trainer.py) or, for
 `--policy primitive`, TD3 (corn_drake/commands/train_primitive.py).
 
 A new run's config is built in layers (corn_drake/config/diagram_files.py and overrides.py):
@@ -113,7 +113,7 @@ def run(args) -> int:
     from corn_drake.config.training import TrainConfig
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.ppo.trainer import Trainer
+    from corn_drake.rl.training.ppo_trainer import Trainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     def check_new():  # a new run's own argument errors, named before a folder it cannot take

@@ -1,5 +1,5 @@
 """`corn-drake train --policy primitive`: the contact-primitive policy, trained off-policy
-(rl/primitive/trainer.py). `train` hands a run here when --policy primitive is given or OUT
+(rl/training/primitive_trainer.py). `train` hands a run here when --policy primitive is given or OUT
 already holds a primitive run.
 
 A new run's config: PrimitiveTrainConfig with its env built in layers — the base diagram, the
@@ -117,7 +117,7 @@ def run(args) -> int:
     from corn_drake.nn.threads import torch_threads
     from corn_drake.rl.checkpoints import keep_encoder_copy, run_encoder_path
     from corn_drake.rl.pretrained_encoders import load_encoder
-    from corn_drake.rl.primitive.trainer import PrimitiveTrainer
+    from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
     from corn_drake.run_folders.resumable import ResumableRun
 
     def check_new():

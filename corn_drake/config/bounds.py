@@ -29,9 +29,9 @@ MultibodyPlantConfig in PhysicsConfig.plant): "plant.time_step": "> 0" declares 
 the Drake struct the project relies on, beside the field that holds it.
 
 Relations between fields are declared beside them, in a class attribute RELATIONS: a tuple of
-Relation(subject, rule, holds, *others), e.g.
+relation(subject, rule, holds, *others), e.g.
 
-    RELATIONS = (Relation("lr_min", "<= {lr}", lambda lr_min, lr: lr_min <= lr, "lr"),)
+    RELATIONS = (relation("lr_min", "<= {lr}", lambda lr_min, lr: lr_min <= lr, "lr"),)
 
 `holds` gets the values of the subject and the others (dotted keys, relative to the config),
 in that order. A relation that spans sections (the workspace against the table) is declared on

@@ -28,7 +28,7 @@ DISCRETE_CONTACT_APPROXIMATIONS = ("tamsi", "sap", "similar", "lagged")
 CONTACT_SURFACE_REPRESENTATIONS = ("triangle", "polygon")
 # How a primitive run's agent chooses (PrimitiveTrainConfig.chooser): its critic's scores, the
 # reward predicted by its outcome model (rl/primitive/outcome/chooser.py; the run's
-# outcome_model.pt), or the value learned from the 6D expert's labels (rl/imitation/chooser.py;
+# outcome_model.pt), or the value learned from the 6D expert's labels (rl/primitive/value_chooser/chooser.py;
 # the run's chooser_value.pt).
 PRIMITIVE_CHOOSERS = ("critic", "outcome_model", "expert_value")
 # What an outcome model reads of each candidate (rl/primitive/outcome/model.INPUT_KINDS, the

@@ -127,8 +127,8 @@ class PrimitiveConfig:
 
 @dc.dataclass
 class PrimitiveTrainConfig(RunSettings):
-    """A primitive training run (rl/primitive/trainer.py). total_steps counts primitives (one
-    env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
+    """A primitive training run (rl/training/primitive_trainer.py). total_steps counts primitives
+    (one env step each); each primitive is followed by `updates_per_step` TD3 updates once the replay
     holds `learning_starts` transitions. The TD3 numbers are set here only
     (rl/primitive/td3.TD3Settings.for_run reads them)."""
     # replay_capacity's bound: ~20 KB per transition (the 16 locations' tokens and features, now

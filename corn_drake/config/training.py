@@ -162,7 +162,7 @@ class DistillConfig(RunSettings):
     BOUNDS = {"window": "[1, 1024]",
               "beta_start": "[0, 1]", "beta_anneal_steps": ">= 0", "lr": "> 0",
               "max_grad_norm": "> 0", "log_every": ">= 1",
-              "teacher": "text",  # a run folder: rl/dagger loads and checks it
+              "teacher": "text",  # a run folder: rl/training/dagger loads and checks it
               "frozen": subset_of(STUDENT_PARAMETER_GROUPS),
               "student_action": one_of(STUDENT_ACTIONS)}
     teacher: str = ""  # the teacher's run folder (`corn-drake train --out`)

@@ -19,6 +19,7 @@ import dataclasses
 import numpy as np
 import torch
 
+from corn_drake.config.bounds import relation
 from corn_drake.contact.gripper_sdf import GripperSDF
 from corn_drake.assets.library_clouds import ObjectCloud
 from corn_drake.transforms import quat_wxyz_to_matrix
@@ -28,6 +29,13 @@ SPLIT_CODES = {"train": 0, "val": 1, "unseen": 2}
 
 @dataclasses.dataclass
 class ContactDataConfig:
+    # The object's placements: a box [low, high] the object's centre is drawn in, above the
+    # gripper's reach of the table (contact/generate.py's samples).
+    BOUNDS = {"points": "[1, 65536]", "radius": "range > 0", "low": "vector 3 finite",
+              "high": "vector 3 finite", "noise": ">= 0", "offset": ">= 0"}
+    RELATIONS = (relation("low", "<= {high} in every coordinate",
+                          lambda low, high: all(a <= b for a, b in zip(low, high)), "high"),)
+
     points: int = 512
     radius: tuple[float, float] = (0.04, 0.12)
     low: tuple[float, float, float] = (-0.24, -0.30, 0.35)

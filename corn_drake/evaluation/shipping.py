@@ -374,7 +374,7 @@ def _pack_primitive(loaded, out: Path, library: str) -> dict:
             shutil.copyfile(run_dir / MODEL_FILE, tmp)
         chooser["outcome_model"] = {"file": MODEL_FILE, **outcome.facts}
         if value_chooser:
-            from corn_drake.rl.imitation.value_model import MODEL_FILE as VALUE_FILE
+            from corn_drake.rl.primitive.value_chooser.value_model import MODEL_FILE as VALUE_FILE
 
             with atomic_path(out / VALUE_FILE) as tmp:
                 shutil.copyfile(run_dir / VALUE_FILE, tmp)

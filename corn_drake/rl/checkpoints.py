@@ -1,4 +1,6 @@
-"""Loading a trained run: its TrainConfig and a TeacherAgent with the saved weights."""
+"""A run folder's files: where its encoder, weights and snapshots are, the env hash its checkpoints
+carry, what --init-from may start from, a DAgger student's loading, and the hash of the weights
+a report measured. The dense teacher's loading is rl/ppo/teacher_runs.py (it needs the agent)."""
 
 from __future__ import annotations
 
@@ -7,8 +9,6 @@ from pathlib import Path
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError, MissingInputError, load_error_detail
 from corn_drake.storage.checkpoint_files import load_checkpoint, load_checkpoint_and_file
-from corn_drake.rl.ppo.agent import TeacherAgent
-from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.run_folders.config_file import load_run_config
 
 
@@ -58,45 +58,6 @@ def snapshot_path(run_dir: str | Path, step: int) -> Path:
 def run_snapshots(run_dir: str | Path) -> list[str]:
     """The kept checkpoints' file names of a run, oldest first."""
     return sorted(p.name for p in (Path(run_dir) / "checkpoints").glob("step_*.pt"))
-
-
-def load_run(run_dir: str | Path, checkpoint: str = "") -> tuple[TrainConfig, TeacherAgent]:
-    """A run's config and agent, from checkpoints/last.pt or, given `checkpoint`, from that file
-    name in its checkpoints folder (a kept snapshot, e.g. step_000204800.pt)."""
-    cfg, agent, _ = load_run_with_step(run_dir, checkpoint)
-    return cfg, agent
-
-
-def load_run_with_step(run_dir: str | Path, checkpoint: str = "") -> tuple[TrainConfig, TeacherAgent, int]:
-    """load_run's (config, agent) and the env steps the loaded checkpoint was trained for."""
-    run_dir = Path(run_dir)
-    cfg = load_run_config(run_dir)
-    cfg.encoder = run_encoder_path(run_dir, cfg.encoder)  # what distill's student starts from too
-    if checkpoint:
-        ckpt = run_dir / "checkpoints" / checkpoint
-        if Path(checkpoint).name != checkpoint or not ckpt.is_file():
-            kept = ", ".join(run_snapshots(run_dir)) or "none"
-            raise MissingInputError(f"--checkpoint {checkpoint!r}: no such file in "
-                                    f"{run_dir / 'checkpoints'} (kept snapshots: {kept})")
-        loaded = load_checkpoint_and_file(ckpt, required=("agent",), fallback=False)
-    else:
-        ckpt = run_dir / "checkpoints" / "last.pt"
-        # Falls back to prev.pt if need be.
-        loaded = load_checkpoint_and_file(ckpt, required=("agent",))
-    if loaded is None:
-        raise MissingInputError(f"no checkpoint in {run_dir}: expected {ckpt}")
-    state, used = loaded
-    check_env_hash(state, cfg, run_dir, used)
-    encoder = load_encoder(cfg.policy, cfg.encoder, cfg.allow_weak_encoder)
-    if any(k.startswith("feature_normalizer.") for k in state["agent"]):
-        raise InputError(f"{used}: trained with normalize_features, which was retired "
-                         "(config/retired.py); the run cannot be loaded")
-    agent = TeacherAgent(cfg.policy, encoder, separate_critic=cfg.ppo.separate_critic)
-    agent.load_saved_state(state["agent"], ckpt)
-    agent.eval()
-    # The file the weights came from: prev.pt when last.pt was unusable (load_checkpoint).
-    agent.checkpoint_file = used.name
-    return cfg, agent, int(state.get("global_step", 0))
 
 
 def load_student_run(run_dir: str | Path):
@@ -234,3 +195,24 @@ def check_env_hash(state: dict, cfg, run_dir, checkpoint) -> None:
                          f"primitive settings) is not the one {checkpoint} was trained with: "
                          "the config was edited after training; restore it (evaluate --task / "
                          "--set change what an evaluation plays without editing the run)")
+
+
+# --- what a report measured --------------------------------------------------------------------
+# The files beside a primitive run's checkpoint that choose for it (an outcome model, a learned
+# 6D chooser): part of its weights_hash.
+CHOOSER_FILES = ("outcome_model.pt", "chooser_value.pt")
+
+
+def weights_hash(run_dir: Path, checkpoint: Path) -> str:
+    """sha256 over run folder `run_dir`'s config.yaml, its weights' `checkpoint` file and the
+    chooser files beside them (CHOOSER_FILES)."""
+    import hashlib
+
+    from corn_drake.run_folders.config_file import run_config_path
+
+    digest = hashlib.sha256()
+    files = [run_config_path(run_dir), checkpoint,
+             *(run_dir / name for name in CHOOSER_FILES if (run_dir / name).is_file())]
+    for path in files:
+        digest.update(Path(path).name.encode() + b"\0" + Path(path).read_bytes())
+    return digest.hexdigest()

@@ -19,13 +19,13 @@ ENCODER_KIND = {"corn": "corn", "e2e": "corn", "pn": "pointnet", "p2v-lite": "p2
                 "rot": "rot"}
 
 # Policies whose encoder PPO never trains: its features can be computed once per collected
-# batch and reused in every PPO epoch (rl/ppo/trainer.py).
+# batch and reused in every PPO epoch (rl/training/ppo_trainer.py).
 FROZEN_ENCODER_POLICIES = ("corn", "pn", "p2v-lite", "rot")
 
 # Policies that cross-attend over the patch encoder's tokens (the rest use an MLP head).
 TOKEN_POLICIES = ("corn", "e2e", "p2v-lite", "rot")
 
 # The contact-primitive policy (rl/primitive/agent.py): the frozen CORN encoder's patch tokens
-# choose where to push; trained off-policy by `train --policy primitive` (rl/primitive/trainer.py),
-# not a PPO variant, so it is not in POLICY_KINDS (the dense comparison's list).
+# choose where to push; trained off-policy by `train --policy primitive`
+# (rl/training/primitive_trainer.py), not a PPO variant, so it is not in POLICY_KINDS (the dense comparison's list).
 TRAIN_POLICIES = (*POLICY_KINDS, PRIMITIVE_POLICY)

@@ -1,5 +1,5 @@
-"""What the teacher's PPO trainer (rl/ppo/trainer.py) and the student's DAgger (rl/dagger.py) share:
-the env batch of a run, CPU copies of state for checkpoints, the progress (counters, curves,
+"""What the teacher's PPO trainer (rl/training/ppo_trainer.py) and the student's DAgger
+(rl/training/dagger.py) share: the env factory of a run, CPU copies of state for checkpoints, the progress (counters, curves,
 RNG streams) a resumed run continues from, and per-object episode counts."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from corn_drake.rl.envs.vec_env import EnvBatch, EnvFactory
+from corn_drake.rl.envs.vec_env import EnvFactory
 
 
 def run_env_factory(env_config, seed: int, workers: int, envs_per_worker: int,
@@ -16,21 +16,6 @@ def run_env_factory(env_config, seed: int, workers: int, envs_per_worker: int,
     object rounds, starting at `start_episode`."""
     return EnvFactory(env_config, seed, num_envs=max(workers, 1) * envs_per_worker,
                       start_episode=start_episode, primitive=primitive)
-
-
-def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
-                   ray_address: str = "", start_episode: int = 0):
-    """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
-    Ray actors stepped in lock step (the DAgger student's; `env_config` a teacher or a student
-    diagram config). The PPO trainer collects whole segments instead (rl/workers/segment_workers.py),
-    the primitive trainer rounds of primitives (rl/workers/primitive_workers.py)."""
-    factory = run_env_factory(env_config, seed, workers, envs_per_worker, start_episode)
-    if workers > 0:
-        from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
-
-        init_ray(ray_address or None)
-        return RayEnvBatch(factory, workers, envs_per_worker)
-    return EnvBatch(factory, envs_per_worker)
 
 
 def to_cpu(state):

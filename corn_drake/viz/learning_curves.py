@@ -1,8 +1,8 @@
 """Learning curves of training runs: success and return against env steps or training hours,
 and the comparison of runs at an equal training time.
 
-A run's history rows (rl/ppo/trainer.py) carry each update's env steps and the steps/s it ran at,
-so the wall-clock a run spent training is the sum of steps / rate over its updates: the time
+A run's history rows (rl/training/ppo_trainer.py) carry each update's env steps and the steps/s
+it ran at, so the wall-clock a run spent training is the sum of steps / rate over its updates: the time
 of the updates only (no start-up, nothing between a kill and the resume), as measured on the
 machine the run went on ("recorded"). On a machine whose one core is shared now and then (an
 evaluation beside the run halves its rate for a while), the run's median rate is the steadier

@@ -24,7 +24,7 @@ from torch import nn
 from corn_drake.rl.imitation.dataset import load_label_arrays
 from corn_drake.rl.imitation.fit import (BATCH_ROWS, HISTORY_EVERY, agreement, fit_value,
                                          inputs, split_objects, state_rows)
-from corn_drake.rl.imitation.value_model import ValueNet
+from corn_drake.rl.primitive.value_chooser.value_model import ValueNet
 
 
 def fit_listwise(data: dict, tokens: bool, updates: int, seed: int, held: dict,
@@ -78,7 +78,7 @@ def write_run(model: ValueNet, out: Path, facts: dict) -> None:
     plays it on episodes)."""
     import dataclasses
 
-    from corn_drake.rl.imitation.value_model import MODEL_FILE, save_value_model
+    from corn_drake.rl.primitive.value_chooser.value_model import MODEL_FILE, save_value_model
     from corn_drake.rl.planner.sources import policy_run_folder
     from corn_drake.rl.primitive.outcome.model import MODEL_FILE as OUTCOME_FILE
     from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts

@@ -1,2 +1,3 @@
-"""The learned 6D chooser: a value network fitted to the 6D expert's labels (`corn-drake label`,
-`corn-drake fit-chooser`), choosing among a primitive run's candidates with no simulator."""
+"""Learning the 6D chooser from the 6D expert's labels (`corn-drake label`, `corn-drake
+fit-chooser`): the labelled states' candidate features (dataset.py) and the fit (fit.py). The
+network it fits chooses at run time from rl/primitive/value_chooser/."""

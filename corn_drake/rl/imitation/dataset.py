@@ -166,7 +166,7 @@ def episode_arrays(path: Path, context: dict, columns: list, record: dict,
     beam's candidates reached (their rewards known, their values not: `chosen` -1)."""
     from corn_drake.assets.library import load_object_spec
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
-    from corn_drake.rl.imitation.features import candidate_features
+    from corn_drake.rl.primitive.value_chooser.features import candidate_features
     from corn_drake.rl.planner.labels import labelled_states
     from corn_drake.rl.primitive.outcome.chooser import candidates_of
 

@@ -14,8 +14,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.rl.imitation.features import BASE_FEATURES
-from corn_drake.rl.imitation.value_model import ValueNet, choose_index
+from corn_drake.rl.primitive.value_chooser.features import BASE_FEATURES
+from corn_drake.rl.primitive.value_chooser.value_model import ValueNet, choose_index
 
 BATCH_ROWS = 256
 ROW_KEYS = ("x", "reward", "value")  # dataset.py's per-candidate arrays ("state" besides)

@@ -135,8 +135,8 @@ class TeacherAgent(nn.Module):
             keypoints = norm.points(keypoints.reshape(*keypoints.shape[:-1], -1, POSITION_DIM))
             return torch.cat([keypoints.flatten(-2), norm.hand(obs["hand_state"])], dim=-1)
         if self.frozen_encoder and "features" in obs:
-            # Precomputed at collection time (rl/ppo/trainer.py): a frozen encoder would give the
-            # same features again, and skipping it makes every PPO epoch much cheaper.
+            # Precomputed at collection time (rl/training/ppo_trainer.py): a frozen encoder
+            # would give the same features again, and skipping it makes every PPO epoch much cheaper.
             return obs["features"]
         if self.kind == "e2e":
             return self.encoder(obs["cloud"], obs["hand_state"])

@@ -197,8 +197,8 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     if cfg.chooser == "expert_value":
         # The learned 6D chooser (rl/imitation/): its value network picks among the candidates
         # the outcome model's choices propose.
-        from corn_drake.rl.imitation.chooser import ValueChooser
-        from corn_drake.rl.imitation.value_model import MODEL_FILE as VALUE_FILE, load_value_model
+        from corn_drake.rl.primitive.value_chooser.chooser import ValueChooser
+        from corn_drake.rl.primitive.value_chooser.value_model import MODEL_FILE as VALUE_FILE, load_value_model
 
         model, facts = load_value_model(run_dir / VALUE_FILE)
         agent.outcome_chooser = ValueChooser(model, facts, agent.outcome_chooser)

@@ -29,7 +29,7 @@ class TeacherRun(LoadedRun):
 
     @classmethod
     def load(cls, run: str, checkpoint: str = "") -> "TeacherRun":
-        from corn_drake.rl.checkpoints import load_run_with_step
+        from corn_drake.rl.ppo.teacher_runs import load_run_with_step
 
         cfg, agent, steps = load_run_with_step(run, checkpoint)
         return cls(run, cfg, agent, cfg.policy, steps, agent.checkpoint_file, Path(run))

@@ -16,9 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-# The files beside a primitive run's checkpoint that choose for it (an outcome model, a learned
-# 6D chooser): part of its weights_hash.
-CHOOSER_FILES = ("outcome_model.pt", "chooser_value.pt")
+from corn_drake.rl.checkpoints import CHOOSER_FILES, weights_hash  # noqa: F401 (read from here too)
 
 
 @dataclass
@@ -101,18 +99,3 @@ class LoadedRun:
         """(the env config the episodes run in, the report fields it adds) for the configured
         `env`: the env itself for a kind that sees no cameras."""
         return env, {}
-
-
-def weights_hash(run_dir: Path, checkpoint: Path) -> str:
-    """sha256 over run folder `run_dir`'s config.yaml, its weights' `checkpoint` file and the
-    chooser files beside them (CHOOSER_FILES)."""
-    import hashlib
-
-    from corn_drake.run_folders.config_file import run_config_path
-
-    digest = hashlib.sha256()
-    files = [run_config_path(run_dir), checkpoint,
-             *(run_dir / name for name in CHOOSER_FILES if (run_dir / name).is_file())]
-    for path in files:
-        digest.update(Path(path).name.encode() + b"\0" + Path(path).read_bytes())
-    return digest.hexdigest()

@@ -145,7 +145,7 @@ def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int 
     # would mix data (processes with other --start values share these).
     from corn_drake.assets.content_hash import library_content_hash
     from corn_drake.rl.checkpoints import agent_weights_folder
-    from corn_drake.rl.runs.loaded import weights_hash
+    from corn_drake.rl.checkpoints import weights_hash
     from corn_drake.run_folders.inputs_record import check_inputs
 
     checkpoint = agent_weights_folder(Path(run), base.agent_weights) / "checkpoints" / \

@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from corn_drake.rl.imitation.features import candidate_features
-from corn_drake.rl.imitation.value_model import choose_index
+from corn_drake.rl.primitive.value_chooser.features import candidate_features
+from corn_drake.rl.primitive.value_chooser.value_model import choose_index
 from corn_drake.rl.primitive.outcome.chooser import candidates_of, choice_of
 
 BANK_SEED = 1  # one fixed bank: the same observation gets the same choice

@@ -19,8 +19,8 @@ The recomputation doubles the student's forward passes but keeps the loss a func
 recorded window (window_loss), which is what the tests check on a fixed dataset. With the
 student's parameters unchanged inside a window, it gives the rollout's outputs exactly.
 
-Run folder as the teacher's (rl/ppo/trainer.py): config.yaml (a DistillConfig), checkpoints/last.pt
-(atomic, prev.pt kept), tb/, metrics.json, plots/. A killed run resumes at its last checkpoint's
+Run folder as the teacher's (rl/training/ppo_trainer.py): config.yaml (a DistillConfig),
+checkpoints/last.pt (atomic, prev.pt kept), tb/, metrics.json, plots/. A killed run resumes at its last checkpoint's
 step with the same student, optimiser, RNG streams and beta; envs start fresh episodes (env
 state is not checkpointed, as for the teacher), and the GRU state starts from zero with them.
 """
@@ -42,13 +42,29 @@ from corn_drake.nn.student import StudentPolicy
 from corn_drake.nn.threads import torch_threads
 from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.device import training_device
-from corn_drake.rl.run_progress import (count_episodes_per_object, make_env_batch, progress_state,
+from corn_drake.rl.envs.vec_env import EnvBatch
+from corn_drake.rl.run_progress import (count_episodes_per_object, progress_state, run_env_factory,
                                         recent_mean, restore_progress, to_cpu)
 from corn_drake.contract import RECENT_EPISODES
 
 CHECKPOINT_KEYS = ("kind", "student", "optimizer", "global_step", "update_index", "beta",
                    "history", "recent_episodes", "episodes_per_object", "torch_rng", "generator",
                    "np_rng")
+
+
+def make_env_batch(env_config, seed: int, workers: int, envs_per_worker: int,
+                   ray_address: str = "", start_episode: int = 0):
+    """The run's envs: `envs_per_worker` envs in this process (workers == 0), or on `workers`
+    Ray actors stepped in lock step (the DAgger student's; `env_config` a teacher or a student
+    diagram config). The PPO trainer collects whole segments instead (rl/workers/segment_workers.py),
+    the primitive trainer rounds of primitives (rl/workers/primitive_workers.py)."""
+    factory = run_env_factory(env_config, seed, workers, envs_per_worker, start_episode)
+    if workers > 0:
+        from corn_drake.rl.workers.ray_workers import RayEnvBatch, init_ray
+
+        init_ray(ray_address or None)
+        return RayEnvBatch(factory, workers, envs_per_worker)
+    return EnvBatch(factory, envs_per_worker)
 
 
 def gaussian_kl(mean_p: torch.Tensor, log_std_p: torch.Tensor, mean_q: torch.Tensor,
@@ -90,7 +106,7 @@ class DaggerTrainer:
     def __init__(self, cfg: DistillConfig, out: str | Path, student: StudentPolicy,
                  teacher: TeacherAgent):
         """`student` built on its encoder (nn/student_io.student_from_encoder), `teacher` a
-        trained agent (rl/checkpoints.load_run); reads the run's checkpoint if there is one."""
+        trained agent (rl/ppo/teacher_runs.load_run); reads the run's checkpoint if there is one."""
         cfg.check()
         self.cfg, self.out = cfg, Path(out)
         self.device = training_device(cfg.device)

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.rl.imitation.features import PRIOR_COLUMN
+from corn_drake.rl.primitive.value_chooser.features import PRIOR_COLUMN
 
 MODEL_FILE = "chooser_value.pt"
 
