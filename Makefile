@@ -20,17 +20,20 @@ BIN := $(VENV)/bin
 
 install: system-deps $(STAMP)
 
-# open3d links libusb-1.0; Drake's headless VTK renderer needs Mesa's EGL vendor library.
+# open3d links libusb-1.0; Drake's headless VTK renderer needs Mesa's EGL vendor library; the
+# browser test opens a recording in Chromium (tests/test_browser_recording.py), ~1 minute to
+# install the first time.
 system-deps:
 	@missing=""; \
 	for lib in libusb-1.0.so.0 libEGL.so.1 libEGL_mesa.so.0; do \
 	  ldconfig -p | grep -q "$$lib" || missing="$$missing $$lib"; \
 	done; \
+	command -v chromium >/dev/null || missing="$$missing chromium"; \
 	if [ -n "$$missing" ]; then \
 	  echo "installing Debian packages for:$$missing"; \
 	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
 	  $$SUDO apt-get update -qq && \
-	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri; \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri chromium; \
 	fi
 
 $(STAMP): pyproject.toml setup.py

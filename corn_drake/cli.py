@@ -22,10 +22,13 @@ from corn_drake.errors import InputError, is_disk_full
 
 
 def _command_modules():
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
+    """Every module of commands/ and its role folders (data/, learning/, reporting/) that
+    defines a subcommand (NAME and run), in the order of their names."""
+    found = pkgutil.walk_packages(commands.__path__, f"{commands.__name__}.")
+    for info in sorted(found, key=lambda m: m.name.rsplit(".", 1)[-1]):
+        if info.ispkg or info.name.rsplit(".", 1)[-1].startswith("_"):
             continue
-        module = importlib.import_module(f"{commands.__name__}.{info.name}")
+        module = importlib.import_module(info.name)
         if hasattr(module, "NAME") and hasattr(module, "run"):
             yield module
 

@@ -18,7 +18,7 @@ and goal (relative to the tracker's estimate), with the teacher's shapes
 (student_observation_shapes).
 
 Encoder input normalisation: points and the hand position enter the encoders as
-(x - ENCODER_INPUT_CENTER) / ENCODER_INPUT_SCALE. nn/input_normalization.py turns these numbers
+(x - ENCODER_INPUT_CENTER) / ENCODER_INPUT_SCALE. nn/encoders/input_normalization.py turns these numbers
 into the module every encoder carries; encoder.pt saves the values it was pretrained with.
 
 Action (normalised to [-1, 1]): EE translation residual (3, world), axis-angle residual

@@ -35,7 +35,7 @@ ROOT_MODULES = {"__init__", "cli", "contract", "errors", "package_data", "signal
 
 
 def _unit(module: str) -> str:
-    """'corn_drake.config.loader' -> 'config'; 'corn_drake' -> '__init__'."""
+    """'corn_drake.config.plumbing.loader' -> 'config'; 'corn_drake' -> '__init__'."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 

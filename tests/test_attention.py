@@ -14,7 +14,7 @@ from pydrake.geometry import Meshcat
 from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import run_episode
 from corn_drake.nn.attention import patch_scores
-from corn_drake.nn.encoder_files import make_policy_encoder
+from corn_drake.nn.encoders.encoder_files import make_policy_encoder
 from corn_drake.rl.ppo.agent import TeacherAgent
 from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.viz.attention_view import step_path, viridis_rgb
@@ -96,7 +96,7 @@ def test_an_untouched_random_head_still_reacts_to_the_cloud(observation):
 
 
 def test_policies_without_cross_attention_refuse(observation):
-    from corn_drake.systems.policy import PolicySystem
+    from corn_drake.systems.policies.policy import PolicySystem
 
     pn = TeacherAgent("pn", make_policy_encoder("pointnet"))
     for agent in (TeacherAgent("state"), pn):

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from corn_drake.bench import cores
+from corn_drake.bench.training import cores
 from corn_drake.cli import main
 
 ENVS, STEPS, SEGMENTS = 1, 4, 2

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.bench import scale
+from corn_drake.bench.training import scale
 from corn_drake.cli import main
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
@@ -228,7 +228,7 @@ def test_scale_ray_address_reaches_every_runs_trainer_config(tmp_path, monkeypat
     the trainer's config (the Trainer joins that cluster: rl/training/ppo_trainer.py); no Ray started."""
     import socket
 
-    from corn_drake.bench import timed_training
+    from corn_drake.bench.training import timed_training
 
     configs = []
 

@@ -8,7 +8,7 @@ import torch
 
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.bench.phases import PhaseTimer
-from corn_drake.bench.train import FRACTION_KEYS
+from corn_drake.bench.training.train import FRACTION_KEYS
 from corn_drake.cli import main
 
 ENVS, UPDATES, ROLLOUT = 2, 1, 4

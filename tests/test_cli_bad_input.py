@@ -454,7 +454,7 @@ def test_library_object_files_are_named(tmp_path):
 
 def test_garbage_encoder_checkpoint_is_named(tmp_path):
     from corn_drake.errors import InputError
-    from corn_drake.nn.encoder_files import load_frozen_encoder
+    from corn_drake.nn.encoders.encoder_files import load_frozen_encoder
 
     bad = tmp_path / "enc.pt"
     bad.write_bytes(b"\x80\x02garbage that is no pickle")

@@ -55,7 +55,7 @@ def test_a_python_without_the_dependencies_gets_one_line(tmp_path, monkeypatch, 
 
 
 def test_a_dependency_missing_at_import_gets_one_line(tmp_path, monkeypatch, capsys):
-    from corn_drake.commands import compare
+    from corn_drake.commands.reporting import compare
 
     def run(args):
         raise ModuleNotFoundError("No module named 'open3d'", name="open3d")
@@ -78,7 +78,7 @@ def test_the_entry_point_without_site_packages_says_how_to_get_them(tmp_path):
 
 
 def test_distill_set_reaches_the_student_and_teacher_sections():
-    from corn_drake.commands.distill import apply_distill_sets
+    from corn_drake.commands.learning.distill import apply_distill_sets
     from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
 
@@ -91,8 +91,8 @@ def test_distill_set_reaches_the_student_and_teacher_sections():
 
 
 def test_distill_task_overlays_the_teacher_env():
-    from corn_drake.commands.distill import with_task
-    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.commands.learning.distill import with_task
+    from corn_drake.config.plumbing.diagram_files import load_teacher_config
 
     teacher = load_teacher_config()
     teacher.scene.object.object_id = "kept"
@@ -105,7 +105,7 @@ def test_a_library_recorded_with_the_old_num_spelling_resumes(tmp_path):
     """arguments.json of a library built before --num became --num-objects still guards it."""
     import json
 
-    from corn_drake.commands.objects import RECORDED_RENAMES
+    from corn_drake.commands.datasets.objects import RECORDED_RENAMES
     from corn_drake.errors import InputError
     from corn_drake.run_folders.guards import resume_arguments
 

@@ -1,5 +1,5 @@
 """Every setting is checked before anything is written (issue 53): each field of each config
-dataclass in corn_drake.config declares its rule (config/bounds.py), the rules and relations
+dataclass in corn_drake.config declares its rule (config/plumbing/bounds.py), the rules and relations
 are readable and name real fields, the hostile probes that once trained silently wrong or ended
 in a traceback are refused in one line naming the key, and every shipped config still passes.
 """
@@ -18,11 +18,11 @@ import pytest
 
 import corn_drake
 from corn_drake.cli import main
-from corn_drake.config.bounds import (check_bounds, check_spec, declared_bounds,
+from corn_drake.config.plumbing.bounds import (check_bounds, check_spec, declared_bounds,
                                       declared_relations, describe, value_at, within)
-from corn_drake.config.diagram_files import available_tasks, load_teacher_config
-from corn_drake.config.loader import load_config
-from corn_drake.config.overrides import apply_sets
+from corn_drake.config.plumbing.diagram_files import available_tasks, load_teacher_config
+from corn_drake.config.plumbing.loader import load_config
+from corn_drake.config.plumbing.overrides import apply_sets
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.config.training import DistillConfig, TrainConfig
 from corn_drake.errors import InputError
@@ -81,7 +81,7 @@ def test_every_config_field_declares_a_rule(cls, name):
     # A field holding a Drake struct (PhysicsConfig.plant, CameraRigConfig.camera) declares the
     # struct's fields it relies on with dotted keys.
     assert name in declared or any(key.startswith(f"{name}.") for key in declared), (
-        f"{cls.__name__}.{name} ({kind}) declares no rule in BOUNDS (config/bounds.py lists "
+        f"{cls.__name__}.{name} ({kind}) declares no rule in BOUNDS (config/plumbing/bounds.py lists "
         "them; free text is 'text')")
 
 
@@ -204,7 +204,7 @@ def test_every_shipped_diagram_and_task_passes_its_check(task):
 
 def test_the_student_diagrams_pass_their_check():
     from corn_drake import DIAGRAMS_DIR
-    from corn_drake.config.diagram_files import load_student_config
+    from corn_drake.config.plumbing.diagram_files import load_student_config
 
     for path in sorted(DIAGRAMS_DIR.glob("student_rollout*.yaml")):
         load_student_config(path).check()

@@ -248,7 +248,7 @@ def _port_sizes(system, kind: str) -> dict[str, int]:
 
 def test_teacher_systems_and_env_follow_the_contract():
     from corn_drake.rl.envs.teacher_env import TeacherEnv
-    from corn_drake.systems.policy import PolicySystem
+    from corn_drake.systems.policies.policy import PolicySystem
 
     env = TeacherEnv()
     n = env.cfg.scene.object.cloud_points

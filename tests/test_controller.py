@@ -5,8 +5,8 @@ import pytest
 
 from corn_drake.config.scene import ControllerConfig
 from corn_drake.scene.franka import EFFORT_LIMITS
-from corn_drake.systems.ik import ActionScaling, ActionToJointTargets, check_action
-from corn_drake.systems.impedance_controller import make_impedance_controller
+from corn_drake.systems.control.ik import ActionScaling, ActionToJointTargets, check_action
+from corn_drake.systems.control.impedance_controller import make_impedance_controller
 from corn_drake.timing import PolicyClock
 
 BACKENDS = ["python", "symbolic"]

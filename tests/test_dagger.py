@@ -15,7 +15,7 @@ from corn_drake.cli import main as cli
 from corn_drake.config.training import DistillConfig
 from corn_drake.contract import ACTION_DIM, student_observation_shapes
 from corn_drake.storage.checkpoint_files import load_checkpoint
-from corn_drake.nn.encoder_files import make_policy_encoder, save_encoder
+from corn_drake.nn.encoders.encoder_files import make_policy_encoder, save_encoder
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.rl.training.dagger import gaussian_kl, window_loss, window_terms
 

@@ -13,7 +13,7 @@ import torch
 from corn_drake.cli import build_parser, main
 from corn_drake.commands.demo import LOG_EVERY, SHIPPED_POLICY, TASK, untrained_agent
 from corn_drake.package_data import data_dir
-from corn_drake.config.loader import load_config
+from corn_drake.config.plumbing.loader import load_config
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.run_folders.config_file import run_config_path
 
@@ -119,7 +119,7 @@ def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
     """The demo's "untrained" evaluation is of the weights PrimitiveTrainer starts from: built
     the same way, they must be equal tensor for tensor (a trainer change that reorders its
     seeding would make the demo compare against another policy)."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.rl.pretrained_encoders import load_encoder
     from corn_drake.rl.training.primitive_trainer import PrimitiveTrainer
 

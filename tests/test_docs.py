@@ -16,7 +16,7 @@ WRONG_CLAIMS = [
     # ~70 % of contact samples penetrate (tests/test_contact_data.py measures it).
     ("corn_drake/contact/generate.py", "roughly half penetrate"),
     # U(0.05, 0.10) m comes from the authors' code; the paper gives a 0.1-0.3 m scale.
-    ("corn_drake/assets/process.py", "the paper's object-radius range"),
+    ("corn_drake/assets/processing/process.py", "the paper's object-radius range"),
 ]
 
 
@@ -67,3 +67,38 @@ def test_readme_commands_parse_with_the_current_flags():
             parser.parse_args(argv)
         except SystemExit:
             pytest.fail(f"{page}: `{line}` does not parse")
+
+
+# A file path the package's comments cite as where to read more: `docs/....md`, `experiments/...`
+# or a module (`corn_drake/...py`, or relative to the package: `rl/training/dagger.py`). Pages and
+# modules move; a citation left behind sends the reader nowhere (config/retired.py once cited a
+# log that had moved).
+_UNITS = sorted(p.name for p in (ROOT / "corn_drake").iterdir()
+                if p.is_dir() and not p.name.startswith("_"))
+# A path after --report or --out is what a command writes, not a citation.
+_CITED = (r"(?<![\w/.])(?<!--report )(?<!--out )((?:docs|experiments)/[\w./-]+\.(?:md|py|sh|json)|corn_drake/[\w/]+\.py"
+          r"|(?:" + "|".join(_UNITS) + r")/[\w/]+\.py)")
+
+
+def cited_paths(text: str) -> list[str]:
+    """The cited paths of `text`, each relative to the checkout."""
+    import re
+
+    found = [m.rstrip(".") for m in re.findall(_CITED, text)]
+    return [m if m.split("/")[0] in ("docs", "experiments", "corn_drake") else f"corn_drake/{m}"
+            for m in found]
+
+
+def test_every_path_the_package_and_docs_cite_exists():
+    missing = []
+    texts = [*sorted((ROOT / "corn_drake").rglob("*.py")), *sorted((ROOT / "docs").rglob("*.md")),
+             ROOT / "README.md"]
+    for path in texts:
+        for cited in cited_paths(path.read_text()):
+            if not (ROOT / cited).exists():
+                missing.append(f"{path.relative_to(ROOT)} cites {cited}")
+    assert missing == []
+    # Not vacuous: the scan finds each form of citation it is for.
+    assert cited_paths("see docs/many_core.md, corn_drake/rl/training/dagger.py and "
+                       "rl/ppo/agent.py; --report docs/x.json") == ["docs/many_core.md", "corn_drake/rl/training/dagger.py",
+                                               "corn_drake/rl/ppo/agent.py"]

@@ -1,4 +1,4 @@
-"""The CORN patch encoder (nn/corn_encoder.py) directly: shapes, what point and patch order do to its
+"""The CORN patch encoder (nn/encoders/corn_encoder.py) directly: shapes, what point and patch order do to its
 tokens, and bad input.
 
 Order behaviour, derived from the code: the patches come from patchify (FPS from point 0, kNN
@@ -17,8 +17,8 @@ import pytest
 import torch
 
 from corn_drake.contract import HAND_STATE_DIM
-from corn_drake.nn.corn_encoder import CORNEncoder
-from corn_drake.nn.patchify import patch_indices
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.patchify import patch_indices
 
 SEED = 0
 

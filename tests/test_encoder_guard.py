@@ -8,8 +8,8 @@ import torch
 
 from corn_drake.cli import main as cli
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_files import (load_frozen_encoder, make_network, make_policy_encoder,
-                                         save_encoder)
+from corn_drake.nn.encoders.encoder_files import (load_frozen_encoder, make_network,
+                                                  make_policy_encoder, save_encoder)
 from corn_drake.rl.pretrained_encoders import MIN_CONTACT_F1, contact_f1, load_encoder
 
 

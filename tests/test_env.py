@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from corn_drake.config.teacher import TeacherDiagramConfig
-from corn_drake.config.loader import load_config
+from corn_drake.config.plumbing.loader import load_config
 from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.scene.objects import ObjectSpec, box_spec
@@ -17,7 +17,7 @@ EXPECTED_SHAPES = {"cloud": (512, 3), "hand_state": (9,), "robot_state": (14,),
 
 def _task(name: str) -> TeacherDiagramConfig:
     """The base diagram with the task overlay diagrams/tasks/NAME.yaml on top."""
-    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.config.plumbing.diagram_files import load_teacher_config
 
     return load_teacher_config(name)
 

@@ -54,7 +54,7 @@ def test_writing_an_episode_restores_the_defaults_first():
 
 def test_the_student_diagram_reuses_the_writer():
     from corn_drake.builders.student import build_student_diagram
-    from corn_drake.systems.cameras import rendering_available
+    from corn_drake.systems.perception.cameras import rendering_available
 
     ok, reason = rendering_available()
     if not ok:

@@ -43,7 +43,7 @@ def test_groups_come_from_the_manifest(tmp_path):
 
 def test_evaluate_on_a_library_reports_success_by_group(tmp_path):
     from corn_drake.assets.library import build_procedural
-    from corn_drake.assets.process import ProcessConfig
+    from corn_drake.assets.processing.process import ProcessConfig
     from corn_drake.cli import main
 
     cfg = ProcessConfig()

@@ -94,23 +94,3 @@ def test_plot_hindsight_curves_draws_from_the_histories(tmp_path):
     _run("experiments.primitive_policy.plot_hindsight_curves", "--results", str(tmp_path))
     for figure in ("hindsight_curves.png", "variant_curves.png"):
         assert (tmp_path / figure).stat().st_size > 1000
-
-
-@pytest.mark.slow
-def test_lookahead_oracle_plays_both_arms_and_resumes(tmp_path):
-    from tests.fixtures import write_loadable_library
-
-    library = write_loadable_library(tmp_path / "lib", 0, num_unseen=1)
-    out = tmp_path / "oracle.json"
-    args = (str(PROPOSING_RUN), "--objects", str(library), "--episodes", "1",
-            "--random-motions", "0", "--set", "primitive.max_primitives=1", "--out", str(out))
-    _run("experiments.primitive_outcomes.lookahead_oracle", *args, timeout=600)
-    report = json.loads(out.read_text())
-    assert report["policy"]["episodes"] == report["lookahead"]["episodes"] == 1
-    row = report["episodes"][0]
-    assert row["policy"]["primitives"] == row["lookahead"]["primitives"] == 1
-    assert report["settings"]["set"] == ["primitive.max_primitives=1"]
-    # A rerun with the same arguments finds the episode done and plays nothing.
-    stamp = out.stat().st_mtime_ns
-    _run("experiments.primitive_outcomes.lookahead_oracle", *args, timeout=600)
-    assert out.stat().st_mtime_ns == stamp

@@ -108,7 +108,7 @@ def test_a_labelled_state_is_rebuilt_from_its_pose(library):
     """The observation the expert searched from and the one rebuilt from the recorded pose
     agree to the pose's micrometre, at every decision of an episode."""
     from corn_drake.assets.library import list_objects, load_object_spec
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
     from corn_drake.rl.planner.labels import labelled_states
@@ -286,7 +286,7 @@ def test_a_planner_worker_that_dies_is_replaced_and_its_episode_played_again(lib
     import os
 
     from corn_drake.assets.library import list_objects, load_object_spec
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
     from corn_drake.evaluation.planner_workers import play_on_workers
     from corn_drake.rl.planner.search import PlannerPolicy

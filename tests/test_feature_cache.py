@@ -17,7 +17,7 @@ import torch
 
 from corn_drake.config.training import TrainConfig
 from corn_drake.contract import ACTION_DIM, observation_shapes
-from corn_drake.nn.encoder_files import make_policy_encoder
+from corn_drake.nn.encoders.encoder_files import make_policy_encoder
 from corn_drake.rl.policy_kinds import ENCODER_KIND, FROZEN_ENCODER_POLICIES
 from corn_drake.rl.ppo.agent import TeacherAgent, obs_to_tensors
 from corn_drake.rl.ppo.segments import SegmentCollector

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from corn_drake.commands.gallery import montage
-from corn_drake.commands.ship import library_arguments
+from corn_drake.commands.reporting.gallery import montage
+from corn_drake.commands.reporting.ship import library_arguments
 from corn_drake.evaluation.shipping import check_measured_weights
 from corn_drake.evaluation.shipping import check_report as _check_report
 from corn_drake.errors import InputError

@@ -4,7 +4,7 @@ fixture library (no policy, no episode: frames made by moving the object toward 
 import numpy as np
 import pytest
 
-from corn_drake.systems.cameras import rendering_available
+from corn_drake.systems.perception.cameras import rendering_available
 from corn_drake.viz.gallery import GOAL_COLOUR, animation_picks, goal_ghost, save_gif
 from tests.fixtures import write_loadable_library
 
@@ -43,7 +43,7 @@ def test_an_animation_of_the_object_moving_to_its_goal_is_a_gif_of_changing_fram
     from PIL import Image, ImageSequence
 
     from corn_drake.assets.library import list_objects, load_object_spec
-    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.config.plumbing.diagram_files import load_teacher_config
     from corn_drake.viz.gallery import StillCamera, side_view
 
     library = write_loadable_library(tmp_path / "lib", 1)

@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig, PrimitiveTrainConfig
 from corn_drake.nn.primitive_features import location_features, with_goal
 from corn_drake.package_data import data_dir
-from corn_drake.rl.primitive.hindsight import (Achieved, HindsightEpisodes, HindsightRule, achieved_states,
-                                     relative_goal, reward, rotation_to, succeeded)
+from corn_drake.rl.primitive.hindsight import (Achieved, HindsightEpisodes, HindsightRule,
+                                               achieved_states, relative_goal, reward, rotation_to,
+                                               succeeded)
 from corn_drake.rl.pretrained_encoders import load_encoder
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.transforms import pose9

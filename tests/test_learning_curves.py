@@ -45,7 +45,7 @@ def test_runs_at_equal_time_are_read_at_the_shortest_runs_hours():
 
 
 def test_curves_against_hours_write_the_figure_and_summary(tmp_path):
-    from corn_drake.commands import curves
+    from corn_drake.commands.reporting import curves
     from corn_drake.errors import InputError
     from corn_drake.storage.atomic_files import write_json
 
@@ -111,7 +111,7 @@ def test_curves_charge_each_run_at_its_policys_benchmarked_rate(tmp_path, capsys
 
 
 def test_bench_policies_times_each_policy_on_the_same_envs(tmp_path, monkeypatch):
-    from corn_drake.bench import timed_training
+    from corn_drake.bench.training import timed_training
     from corn_drake.cli import main
 
     trained = []  # (policy, separate critic) of each trainer the benchmark ran

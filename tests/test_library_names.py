@@ -306,7 +306,7 @@ def test_the_cli_prints_a_full_disk_in_one_line(tmp_path, monkeypatch, capsys):
     atomic_path), end a command in one line and exit 2, not a traceback."""
     import torch
 
-    from corn_drake.commands import objects
+    from corn_drake.commands.datasets import objects
     from corn_drake.storage.atomic_files import write_json
     from corn_drake.storage.checkpoint_files import save_checkpoint
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.primitive.outcome.lookahead import candidate_primitives, lookahead_step
@@ -125,7 +125,7 @@ def test_the_candidates_are_the_policys_choice_its_actor_elsewhere_and_random_mo
 
 
 def test_the_agents_choice_carries_every_locations_motion():
-    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.nn.encoders.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(0)

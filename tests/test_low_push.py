@@ -1,4 +1,4 @@
-"""Low side pushes (systems/low_push.py, PrimitiveConfig.push_height and finger_tilt_deg): the aim
+"""Low side pushes (systems/control/low_push.py, PrimitiveConfig.push_height and finger_tilt_deg): the aim
 point drops toward the table on side faces only, as far as the cloud leaves room for the
 fingers; the leaning hand's rotation; and in the real diagram a push on a tall box tips it with
 vertical fingers (the palm meets it first) and slides it pushed low with leaning fingers."""
@@ -10,7 +10,7 @@ import pytest
 
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.low_push import FINGER_COLUMN_RADIUS, FINGER_DEPTH, push_contact
+from corn_drake.systems.control.low_push import FINGER_COLUMN_RADIUS, FINGER_DEPTH, push_contact
 
 LOW = PrimitiveConfig(push_height=0.02)
 
@@ -81,7 +81,7 @@ def test_an_object_wider_below_stops_the_fingers_above_it():
 
 
 def test_leaning_fingers_point_down_and_toward_the_surface_with_the_narrow_side_facing_it():
-    from corn_drake.systems.primitive_executor import facing_rotation
+    from corn_drake.systems.control.primitive_executor import facing_rotation
 
     facing = np.array([0.6, 0.8])  # the outward normal's horizontal direction
     R = facing_rotation(np.eye(3), facing, np.deg2rad(30))
@@ -103,8 +103,9 @@ def test_the_fingers_lean_only_where_the_object_reaches_the_palm():
     point leans the fingers; a flat one (a book) keeps them vertical, whose lowest corners would
     otherwise come within millimetres of the table."""
     from corn_drake.config.scene import ControllerConfig
-    from corn_drake.systems.primitive_executor import (_LEAN, PALM_ABOVE_TOOL, PrimitivePlanner,
-                                                       facing_rotation, make_primitive)
+    from corn_drake.systems.control.primitive_executor import (_LEAN, PALM_ABOVE_TOOL,
+                                                               PrimitivePlanner, facing_rotation,
+                                                               make_primitive)
 
     cfg = PrimitiveConfig(push_height=0.02, finger_tilt_deg=30)
     planner = PrimitivePlanner(cfg, ControllerConfig())
@@ -120,7 +121,7 @@ def test_the_fingers_lean_only_where_the_object_reaches_the_palm():
 
 
 def test_push_height_is_range_checked():
-    from corn_drake.config.bounds import check_bounds
+    from corn_drake.config.plumbing.bounds import check_bounds
     from corn_drake.errors import InputError
 
     with pytest.raises(InputError, match="push_height"):
@@ -134,7 +135,7 @@ def _push_tall_box(primitive: PrimitiveConfig) -> tuple[bool, float, float]:
     """One primitive on an upright 5 x 5 x 10 cm box, at a side point 6 cm up, straight inward
     (0.7 x push_distance: ~6.5 cm past the surface), horizontally: (reached, how far the box
     moved in xy, how far its up axis tilted, rad)."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
     from corn_drake.transforms import quat_wxyz_to_matrix, up_angle
 

@@ -22,7 +22,7 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from corn_drake.systems.cameras import rendering_available
+from corn_drake.systems.perception.cameras import rendering_available
 from tests.paths import REPO_ROOT
 
 # Notebooks that record an episode leave a standalone Meshcat HTML file; the perception

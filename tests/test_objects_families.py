@@ -29,8 +29,8 @@ def test_unknown_family_is_named():
 
 @pytest.mark.parametrize("family, seed", [("mug", 0), ("bowl", 0), ("toy", 3), ("block", 1)])
 def test_concave_family_hulls_stay_within_15_percent_of_the_mesh_volume(family, seed, tmp_path):
-    from corn_drake.assets.decompose import DecompositionConfig, decompose
-    from corn_drake.assets.process import normalise
+    from corn_drake.assets.processing.decompose import DecompositionConfig, decompose
+    from corn_drake.assets.processing.process import normalise
 
     mesh = normalise(make_family_mesh(family, seed), 0.08)
     hulls, ratio, runs = decompose(mesh, DecompositionConfig(), tmp_path)

@@ -5,10 +5,10 @@ import json
 
 import pytest
 
-from corn_drake.assets.decompose import DecompositionConfig, decompose
+from corn_drake.assets.processing.decompose import DecompositionConfig, decompose
 from corn_drake.cli import main
-from corn_drake.commands import objects
-from corn_drake.commands.ship import library_arguments, with_hull_budget
+from corn_drake.commands.datasets import objects
+from corn_drake.commands.reporting.ship import library_arguments, with_hull_budget
 from corn_drake.errors import InputError
 from tests.fixtures import one_error_line
 
@@ -21,7 +21,7 @@ def test_the_default_budget_is_the_decompositions_own():
 
 def test_coacd_keeps_a_mug_within_the_budget():
     from corn_drake.assets.families import make_family_mesh
-    from corn_drake.assets.process import normalise
+    from corn_drake.assets.processing.process import normalise
 
     mesh = normalise(make_family_mesh("mug", MUG_SEED), 0.08)
     free, _, _ = decompose(mesh, DecompositionConfig(), None)

@@ -9,10 +9,11 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from corn_drake.assets.hulls import HullConfig, drake_hull_problem, loadable_hull, obj_text
+from corn_drake.assets.processing.hulls import (HullConfig, drake_hull_problem, loadable_hull,
+                                                obj_text)
 from corn_drake.assets.ingest import Rejected
-from corn_drake.assets.process import loadable_hulls
-from corn_drake.assets.stable_poses import _rotation_taking
+from corn_drake.assets.processing.process import loadable_hulls
+from corn_drake.assets.processing.stable_poses import _rotation_taking
 from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.builder import build_table_scene
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from corn_drake.assets.library import ingest_folder
-from corn_drake.assets.process import ProcessConfig
+from corn_drake.assets.processing.process import ProcessConfig
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,10 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from corn_drake.assets.library import build_procedural, list_objects, load_object_spec, read_manifest
+from corn_drake.assets.library import (build_procedural, list_objects, load_object_spec,
+                                       read_manifest)
 from corn_drake.assets.manifest import write_manifest
-from corn_drake.assets.process import ProcessConfig
+from corn_drake.assets.processing.process import ProcessConfig
 from corn_drake.config.scene import SceneConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.rl.envs.teacher_env import TeacherEnv

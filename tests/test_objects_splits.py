@@ -86,7 +86,7 @@ def test_bad_entries_and_fractions_are_named():
 
 
 def test_objects_command_summary_counts_unseen_by_group():
-    from corn_drake.commands.objects import _split_summary
+    from corn_drake.commands.datasets.objects import _split_summary
 
     objects = _procedural(80)
     assign_splits(objects, seed=0)

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from corn_drake.assets.hulls import obj_text
+from corn_drake.assets.processing.hulls import obj_text
 from pydrake.math import RotationMatrix
 
-from corn_drake.assets.stable_poses import (DropConfig, _quat, _TableSim, _touching,
+from corn_drake.assets.processing.stable_poses import (DropConfig, _quat, _TableSim, _touching,
                                             find_stable_poses, second_setting)
 from corn_drake.config.scene import SceneConfig
 from corn_drake.scene.objects import ObjectSpec
@@ -80,8 +80,8 @@ def test_a_pose_only_the_training_setting_holds_is_dropped_and_counted(tmp_path)
 
 
 def test_kept_fraction_is_the_share_of_training_poses_the_second_setting_keeps():
-    from corn_drake.assets.process import kept_fraction
-    from corn_drake.commands.objects import _stable_pose_summary
+    from corn_drake.assets.processing.process import kept_fraction
+    from corn_drake.commands.datasets.objects import _stable_pose_summary
 
     assert kept_fraction({"verified": 4, "held_second_setting": 3}) == 0.75
     assert kept_fraction({"verified": 0, "held_second_setting": 0}) == 0.0
@@ -113,7 +113,7 @@ def _support_margin(pose: np.ndarray, vertices: np.ndarray, com: np.ndarray) -> 
 
 def _recording_rests(monkeypatch):
     """The object-frame down direction of every drop's rest, as find_stable_poses sees it."""
-    from corn_drake.assets import stable_poses
+    from corn_drake.assets.processing import stable_poses
 
     rests, face_of = [], stable_poses.StableFaces.face_of
     monkeypatch.setattr(stable_poses.StableFaces, "face_of",
@@ -128,7 +128,7 @@ def test_stored_poses_do_not_follow_the_simulations_last_digits(tmp_path, monkey
     stored poses come from the stable hull faces the drops rest on, so they are byte for byte
     the same arrays, on the 1e-9 grid, each with its lowest vertex on the table top and the
     centre of mass projecting inside the face it rests on."""
-    from corn_drake.assets import stable_poses
+    from corn_drake.assets.processing import stable_poses
     from corn_drake.scene.objects import TABLE_TOP_Z
     from corn_drake.transforms import quat_wxyz_to_matrix
 
@@ -164,7 +164,7 @@ def _leaning_tower() -> np.ndarray:
 
 
 def test_stable_faces_are_those_holding_the_centre_of_mass():
-    from corn_drake.assets.stable_poses import stable_faces
+    from corn_drake.assets.processing.stable_poses import stable_faces
 
     cfg = DropConfig()
     faces = stable_faces(_leaning_tower(), np.zeros(3), cfg)
@@ -185,7 +185,7 @@ def test_a_flat_face_printed_to_8_decimals_is_still_one_face():
     too small to hold the centre of mass alone; the object still stands on each cap."""
     from scipy.spatial.transform import Rotation
 
-    from corn_drake.assets.stable_poses import stable_faces
+    from corn_drake.assets.processing.stable_poses import stable_faces
 
     axis = Rotation.from_rotvec([0.3, -0.7, 0.2])
     mesh = trimesh.creation.cylinder(radius=0.03, height=0.05, sections=32)
@@ -208,7 +208,7 @@ def test_an_ellipsoid_with_no_large_face_keeps_a_pose_it_rests_on(tmp_path):
     (where the drops come to rest on the compliant table) or on a face holding its centre of
     mass."""
     from corn_drake.assets.families import make_family_mesh
-    from corn_drake.assets.process import ProcessConfig, process_object
+    from corn_drake.assets.processing.process import ProcessConfig, process_object
 
     seed = 2383511823
     cfg = ProcessConfig(drops=DropConfig(drops=12))
@@ -216,7 +216,7 @@ def test_an_ellipsoid_with_no_large_face_keeps_a_pose_it_rests_on(tmp_path):
                             np.random.default_rng(seed), cfg, convex=True, cache_dir=None)
     assert fields["num_stable_poses"] >= 1, fields["drops"]
     poses = np.load(tmp_path / fields["stable_poses"])
-    from corn_drake.assets.process import obj_vertices
+    from corn_drake.assets.processing.process import obj_vertices
 
     vertices = np.concatenate([obj_vertices((tmp_path / h).read_text()) for h in fields["hulls"]])
     from scipy.spatial import ConvexHull

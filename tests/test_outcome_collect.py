@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.errors import InputError
 from corn_drake.rl.primitive.outcome.collect import collect_episode, stack_states
@@ -16,7 +16,7 @@ from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 
 
 def _agent():
-    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.nn.encoders.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(0)

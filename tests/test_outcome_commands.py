@@ -109,7 +109,7 @@ def test_objects_fits_the_states_of_that_many_objects(data, tmp_path):
 
 def test_out_run_writes_a_run_folder_that_chooses_by_the_model(data, tmp_path, capsys):
     from corn_drake.config.primitive import PrimitiveTrainConfig
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.run_folders.config_file import run_config_path
 
     out = tmp_path / "run"
@@ -204,4 +204,44 @@ def test_collect_outcomes_refuses_a_library_without_training_objects(tmp_path, c
     assert main(["collect-outcomes", str(PROPOSING_RUN), "--objects", str(library),
                  "--episodes", "1", "--out", str(tmp_path / "data")]) == 2
     one_error_line(capsys, "no training objects")
+    assert not (tmp_path / "data").exists()
+
+
+@pytest.mark.slow
+def test_collect_outcomes_over_ray_workers_writes_the_same_chunks(tmp_path, capsys):
+    """`collect-outcomes --workers 2`: the chunks collected in two Ray worker processes (the
+    objects sent through the object store) are the files one process writes: the same episodes,
+    objects, states and candidates, the same outcomes up to rounding; a rerun writes nothing."""
+    import ray
+
+    from tests.fixtures import write_loadable_library
+
+    from corn_drake.rl.primitive.outcome.data import load_outcome_data
+
+    library = write_loadable_library(tmp_path / "lib", 2, num_unseen=0)
+    argv = ["collect-outcomes", str(PROPOSING_RUN), "--objects", str(library), "--episodes", "3",
+            "--chunk", "1", "--random-motions", "1", "--set", "primitive.max_primitives=2"]
+    try:
+        assert main([*argv, "--out", str(tmp_path / "one")]) == 0
+        assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
+        names = lambda d: sorted(p.name for p in (tmp_path / d).iterdir())  # noqa: E731
+        assert names("one") == names("two") == [
+            "episodes_00000.npz", "episodes_00001.npz", "episodes_00002.npz", "inputs.json"]
+        one, two = load_outcome_data([tmp_path / "one"]), load_outcome_data([tmp_path / "two"])
+        assert one.keys() == two.keys()
+        for key in ("episode", "object", "state", "location"):
+            assert one[key].tolist() == two[key].tolist(), key
+        for key in ("reward", "motion", "features_tokens", "pose_after"):
+            assert np.allclose(one[key], two[key], atol=1e-5), key
+        capsys.readouterr()
+        assert main([*argv, "--workers", "2", "--out", str(tmp_path / "two")]) == 0
+        assert "wrote 0 file(s)" in capsys.readouterr().out
+    finally:
+        ray.shutdown()
+
+
+def test_collect_outcomes_ray_address_needs_workers(tmp_path, capsys):
+    assert main(["collect-outcomes", str(PROPOSING_RUN), "--ray-address", "auto",
+                 "--out", str(tmp_path / "data")]) == 2
+    one_error_line(capsys, "--ray-address needs --workers")
     assert not (tmp_path / "data").exists()

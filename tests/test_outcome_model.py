@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.rl.primitive.outcome.model_file import load_outcome_parts, save_outcome_model
 from corn_drake.rl.primitive.outcome.model import (SCALE, Candidates, OutcomeModel, data_after,
@@ -151,7 +151,7 @@ def test_a_fit_records_its_learning_curve_without_changing_its_weights():
 def test_a_model_of_pushes_that_carry_the_object_pushes_toward_the_goal():
     """The chooser's push frames back in the world: told that every push carries the object
     5 cm along its own heading, it chooses a motion heading for the goal (5 cm away in +y)."""
-    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.nn.encoders.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.outcome.chooser import OutcomeChooser
     from corn_drake.rl.primitive.agent import PrimitiveAgent
     from corn_drake.rl.envs.primitive_env import PrimitiveEnv
@@ -298,7 +298,7 @@ def test_a_file_written_with_an_ensemble_and_a_tilt_classifier_loads_its_model(t
 
 
 def test_the_retired_outcome_settings_are_refused_where_evaluate_applies_them():
-    from corn_drake.config.diagram_files import primitive_run_on
+    from corn_drake.config.plumbing.diagram_files import primitive_run_on
     from corn_drake.config.primitive import PrimitiveTrainConfig
 
     for retired in ("outcome.pessimism=1", "outcome.tilt_veto=0.5", "outcome.tilt_blend=true"):

@@ -1,4 +1,4 @@
-"""Patchify (nn/patchify.py): farthest-point centres, sorted kNN groups.
+"""Patchify (nn/encoders/patchify.py): farthest-point centres, sorted kNN groups.
 
 What the design promises about point order, derived from the code: FPS starts at point 0 and
 then always takes the point farthest from the centres chosen so far, and kNN returns each
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.nn.patchify import farthest_point_sample, gather_points, group, patch_indices
+from corn_drake.nn.encoders.patchify import (farthest_point_sample, gather_points, group,
+                                             patch_indices)
 
 SEED = 0
 

@@ -6,7 +6,7 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
 from corn_drake.config.student import StudentDiagramConfig
-from corn_drake.systems.cameras import look_at, rendering_available
+from corn_drake.systems.perception.cameras import look_at, rendering_available
 
 ok, reason = rendering_available()
 pytestmark = pytest.mark.skipif(not ok, reason=reason)

@@ -10,11 +10,11 @@ import yaml
 from pydrake.common.yaml import yaml_dump_typed
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config.loader import load_config
+from corn_drake.config.plumbing.loader import load_config
 from corn_drake.config.student import StudentDiagramConfig
-from corn_drake.config.diagram_files import STUDENT_BASE_DIAGRAM, load_student_config
+from corn_drake.config.plumbing.diagram_files import STUDENT_BASE_DIAGRAM, load_student_config
 from corn_drake.errors import InputError
-from corn_drake.systems.segmentation import dbscan_eps, outlier_points
+from corn_drake.systems.perception.segmentation import dbscan_eps, outlier_points
 
 
 class _TaggedLoader(yaml.SafeLoader):

@@ -7,9 +7,9 @@ from pydrake.math import RigidTransform
 
 from corn_drake.contract import ACTION_DIM
 from corn_drake.builders.student import build_student_diagram
-from corn_drake.config.diagram_files import load_student_config
-from corn_drake.systems.cameras import rendering_available
-from corn_drake.systems.pose_tracker import pose7_to_matrix
+from corn_drake.config.plumbing.diagram_files import load_student_config
+from corn_drake.systems.perception.cameras import rendering_available
+from corn_drake.systems.perception.pose_tracker import pose7_to_matrix
 from corn_drake.transforms import pose9, quat_wxyz_to_matrix
 
 ok, reason = rendering_available()

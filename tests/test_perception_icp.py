@@ -6,7 +6,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from corn_drake.config.student import TrackerConfig
 from corn_drake.scene.objects import box_spec
-from corn_drake.systems.pose_tracker import icp, initial_state, pose_error, track_step
+from corn_drake.systems.perception.pose_tracker import icp, initial_state, pose_error, track_step
 
 
 def _partial_box_cloud(size, seed=0):

@@ -9,7 +9,7 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from corn_drake.contract import FREE_BODY_STATE_DIM
 from corn_drake.builders.student import _pose7_selector
-from corn_drake.systems.cameras import CameraAim, look_at
+from corn_drake.systems.perception.cameras import CameraAim, look_at
 
 
 def _free_body_state(X: RigidTransform, v=(0.1, -0.2, 0.3, 0.4, -0.5, 0.6)) -> np.ndarray:

@@ -6,7 +6,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.scene.objects import box_spec
-from corn_drake.systems.cameras import rendering_available
+from corn_drake.systems.perception.cameras import rendering_available
 
 ok, reason = rendering_available()
 pytestmark = pytest.mark.skipif(not ok, reason=reason)
@@ -65,7 +65,7 @@ def test_robot_points_removed_when_the_gripper_touches_the_object():
 
 def test_without_the_robot_link_test_the_robot_leaks_in(monkeypatch):
     """Control for the test above: the link test is what removes the hand."""
-    import corn_drake.systems.segmentation as segmentation
+    import corn_drake.systems.perception.segmentation as segmentation
 
     # The link test switched off (no point is inside any link); a negative robot_margin did
     # this before the config's bounds refused one.

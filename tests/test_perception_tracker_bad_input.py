@@ -12,8 +12,8 @@ from pydrake.perception import BaseField, Fields, PointCloud
 
 from corn_drake.config.student import StudentDiagramConfig, TrackerConfig
 from corn_drake.scene.objects import box_spec
-from corn_drake.systems.cameras import rendering_available
-from corn_drake.systems.pose_tracker import PoseTracker, matrix_to_pose7
+from corn_drake.systems.perception.cameras import rendering_available
+from corn_drake.systems.perception.pose_tracker import PoseTracker, matrix_to_pose7
 
 X0 = RigidTransform([0.02, -0.03, 0.45]).GetAsMatrix4()
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from corn_drake.systems.cameras import rendering_available
+from corn_drake.systems.perception.cameras import rendering_available
 
 ok, reason = rendering_available()
 pytestmark = pytest.mark.skipif(not ok, reason=reason)

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.errors import InputError
-from corn_drake.evaluation.planner_episodes import wilson
+from corn_drake.evaluation.episode_rows import wilson
 from corn_drake.evaluation.planner_play import cloud_distance
 from corn_drake.config.planner import PlannerConfig, PlannerRunConfig
 from corn_drake.rl.envs.branching import Candidate
@@ -20,7 +20,7 @@ from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.storage.gz_lines import read_lines
 from corn_drake.rl.planner.kinds import goal_errors, propose
 from corn_drake.rl.planner.search import Planner, budget
-from corn_drake.systems.primitive_executor import reachable_from_above
+from corn_drake.systems.control.primitive_executor import reachable_from_above
 from corn_drake.transforms import quat_wxyz_to_matrix
 
 
@@ -314,13 +314,16 @@ def test_wilson_interval_and_the_cloud_distance():
     assert np.isclose(cloud_distance(cloud, pose, flipped), 0.1)
 
 
-def test_evaluate_refuses_episodes_from_for_a_learned_policy(tmp_path, capsys):
+def test_episodes_from_past_the_last_episode_is_refused_for_every_kind(tmp_path, capsys):
+    # --episodes-from is every evaluation's now (tests/test_episode_core.py); a range with no
+    # episode in it is refused before any file is written.
     from corn_drake.cli import main
 
-    code = main(["evaluate", "--run", "scripted", "--episodes-from", "3", "--episodes", "5",
-                 "--report", str(tmp_path / "r.json")])
-    assert code != 0
-    assert "--episodes-from 3 applies to the 6D expert" in capsys.readouterr().err
+    code = main(["evaluate", "--run", "scripted", "--episodes-from", "5", "--episodes", "5",
+                 "--record", "0", "--report", str(tmp_path / "r.json")])
+    assert code == 2
+    assert "no episodes in [5, 5)" in capsys.readouterr().err
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.rows.jsonl").exists()
 
 
 def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys):
@@ -358,7 +361,7 @@ def test_evaluate_runs_the_planner_reports_its_cost_and_resumes(tmp_path, capsys
     # Replayed from its seed with the executed primitives, the episode lands on the labelled
     # states: on this machine every executed primitive earns what it earned in the search.
     from corn_drake.assets.library import load_object_spec
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.rl.planner.labels import read_labels, replay
 
     settings, columns, records = read_labels(report.with_name("r.labels.jsonl.gz"))

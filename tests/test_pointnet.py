@@ -2,7 +2,7 @@
 
 import torch
 
-from corn_drake.nn.pointnet import PointNetContactModel
+from corn_drake.nn.encoders.pointnet import PointNetContactModel
 
 
 def test_split_head_matches_concatenated_head():
@@ -28,8 +28,8 @@ def test_first_layer_reads_points_in_the_gripper_frame():
     import numpy as np
 
     from corn_drake.pretraining.contact import hand9
-    from corn_drake.nn.input_normalization import InputNormalization
-    from corn_drake.nn.pointnet import PointNetEncoder
+    from corn_drake.nn.encoders.input_normalization import InputNormalization
+    from corn_drake.nn.encoders.pointnet import PointNetEncoder
     from corn_drake.transforms import quat_wxyz_to_matrix
 
     rng = np.random.default_rng(3)

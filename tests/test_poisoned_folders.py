@@ -4,7 +4,7 @@ requested counts as no change."""
 
 import pytest
 
-from corn_drake.config.overrides import set_fields
+from corn_drake.config.plumbing.overrides import set_fields
 from corn_drake.config.training import TrainConfig
 from corn_drake.errors import InputError
 from corn_drake.run_folders.config_file import write_run_config

@@ -10,7 +10,7 @@ import torch
 from corn_drake.cli import main
 from corn_drake.config.pretraining import PretextConfig, pretext_config
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_files import load_frozen_encoder
+from corn_drake.nn.encoders.encoder_files import load_frozen_encoder
 from corn_drake.nn.geometry import matrix_from_rot6d, random_rotations, rot6d, rotation_angle
 from corn_drake.pretext.p2v import SHARED, ema_decay, random_patch_mask
 from corn_drake.pretraining.pretext import PretextPretrainer

@@ -16,7 +16,7 @@ from corn_drake.config.training import TrainConfig
 from corn_drake.contract import ACTION_DIM, observation_shapes
 from corn_drake.errors import InputError
 from corn_drake.config.pretraining import pretext_config
-from corn_drake.nn.encoder_files import make_policy_encoder, save_encoder
+from corn_drake.nn.encoders.encoder_files import make_policy_encoder, save_encoder
 from corn_drake.nn.policy import CrossAttentionActorCritic
 from corn_drake.pretraining.pretext import PretextPretrainer
 from corn_drake.rl.ppo.agent import TeacherAgent

@@ -12,11 +12,11 @@ from corn_drake.pretraining.contact import Pretrainer, augment, hand9, patch_lab
 from corn_drake.contact.runner import generate_dataset
 from corn_drake.contract import ENCODER_INPUT_CENTER, ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_files import (NormalizedEncoder, load_contact_model, load_frozen_encoder,
-                                         make_network, save_encoder)
+from corn_drake.nn.encoders.encoder_files import (NormalizedEncoder, load_contact_model,
+                                                  load_frozen_encoder, make_network, save_encoder)
 from corn_drake.nn.geometry import quat_wxyz_to_matrix
-from corn_drake.nn.input_normalization import InputNormalization
-from corn_drake.nn.metrics import binary_metrics
+from corn_drake.nn.encoders.input_normalization import InputNormalization
+from corn_drake.nn.encoders.metrics import binary_metrics
 from tests.fixtures import write_tiny_library
 
 
@@ -125,7 +125,7 @@ def test_an_encoder_file_without_a_contact_head_is_named(tmp_path):
     with pytest.raises(InputError, match="contact head does not fit"):
         load_contact_model(path)
     # PointNet: point logits from the head kept beside the encoder.
-    from corn_drake.nn.pointnet import PointNetContactModel
+    from corn_drake.nn.encoders.pointnet import PointNetContactModel
 
     trained = PointNetContactModel().eval()
     path = tmp_path / "pointnet.pt"

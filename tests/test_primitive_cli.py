@@ -412,7 +412,7 @@ def test_init_from_starts_with_the_source_runs_actor_and_critic(tmp_path, capsys
     source, run = tmp_path / "source", tmp_path / "run"
     assert _train(source, 16) == 0
     trainer = PrimitiveTrainer.__new__(PrimitiveTrainer)  # only to read what a new run loads
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.rl.pretrained_encoders import load_encoder
 

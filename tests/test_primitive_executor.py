@@ -12,7 +12,7 @@ import torch
 from pydrake.geometry import Meshcat
 from pydrake.math import RotationMatrix
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.scene import ControllerConfig
 from corn_drake.contract import ACTION_SLICES
@@ -20,9 +20,10 @@ from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import DiagramEnv
 from corn_drake.rl.envs.primitive_env import PrimitiveEnv
 from corn_drake.scene.objects import TABLE_TOP_Z
-from corn_drake.systems.low_push import push_contact
-from corn_drake.systems.primitive_executor import (IDLE, PUSH, RETREAT, SETTLE, STATUS_LAYOUT,
-                                                   PrimitivePlanner, make_primitive)
+from corn_drake.systems.control.low_push import push_contact
+from corn_drake.systems.control.primitive_executor import (IDLE, PUSH, RETREAT, SETTLE,
+                                                           STATUS_LAYOUT, PrimitivePlanner,
+                                                           make_primitive)
 from corn_drake.transforms import quat_wxyz_to_matrix, rotation_angle
 from corn_drake.viz.attention_view import viridis_rgb
 from corn_drake.viz.primitive_view import nearest_locations, primitive_path
@@ -41,8 +42,8 @@ def mug_library(tmp_path_factory):
     from corn_drake.assets.families import make_family_mesh
     from corn_drake.assets.library import SPEC_FIELDS
     from corn_drake.assets.manifest import LibraryObject, Manifest, write_manifest
-    from corn_drake.assets.process import ProcessConfig, process_object
-    from corn_drake.assets.stable_poses import DropConfig
+    from corn_drake.assets.processing.process import ProcessConfig, process_object
+    from corn_drake.assets.processing.stable_poses import DropConfig
 
     out = tmp_path_factory.mktemp("mug_library")
     fields = process_object(make_family_mesh("mug", MUG_SEED), "mug", out,
@@ -285,7 +286,7 @@ def test_a_primitive_into_the_table_leaves_the_object_where_it_was():
 # ------------------------------------------------------------------------------- the policy
 
 def _agent(seed: int = 0):
-    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.nn.encoders.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     torch.manual_seed(seed)
@@ -345,7 +346,7 @@ def test_the_reported_location_is_the_policys_own_choice(chooser, settle):
         np.testing.assert_allclose(policy.GetOutputPort("scores").Eval(ctx), choice["scores"],
                                    atol=1e-6)
         # The executor pushes from the pre-contact point of the chosen point (lowered for a
-        # low side push, systems/low_push.py).
+        # low side push, systems/control/low_push.py).
         pre = env.handles.executor.planner.pre_contact(*push_contact(
             seen["cloud"], seen["normals"], choice["point"], env.primitive_cfg))
         np.testing.assert_allclose(_status(env)["pre_contact"], pre, atol=1e-6)

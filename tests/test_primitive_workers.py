@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from corn_drake.config.diagram_files import load_primitive_env_config
+from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.nn.threads import torch_threads
 from corn_drake.package_data import data_dir

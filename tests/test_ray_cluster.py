@@ -248,7 +248,7 @@ def _hide_after_packing(monkeypatch):
 
 def test_primitive_and_distill_workers_on_two_nodes_without_the_drivers_files(
         tmp_path, monkeypatch, no_ray_in_this_process):
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.config.teacher import TeacherDiagramConfig
     from corn_drake.rl.envs.vec_env import EnvFactory

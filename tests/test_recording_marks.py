@@ -5,7 +5,7 @@ framed on the push (viz/meshcat.show_goal / show_path). Read back from the HTML 
 import numpy as np
 from pydrake.geometry import Meshcat
 
-from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.config.plumbing.diagram_files import load_teacher_config
 from corn_drake.evaluation.episodes import run_episode
 from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.rl.scripted import ScriptedPushAgent

@@ -13,7 +13,7 @@ import pytest
 
 from corn_drake.cli import main
 from corn_drake.errors import InputError
-from corn_drake.evaluation.planner_episodes import claim_range
+from corn_drake.evaluation.episode_rows import claim_range
 
 GATE_A = Path(__file__).resolve().parents[1] / "docs/results/planner/gate_a_policy_first40.rows.jsonl"
 

@@ -6,11 +6,11 @@ import typing
 
 import pytest
 
-from corn_drake.config.overrides import apply_sets
+from corn_drake.config.plumbing.overrides import apply_sets
 from corn_drake.config.primitive import PrimitiveTrainConfig
 from corn_drake.config.retired import RETIRED
 from corn_drake.config.training import DistillConfig, TrainConfig
-from corn_drake.config.yaml_io import dump_tagged_yaml, field_types, read_tagged_yaml
+from corn_drake.config.plumbing.yaml_io import dump_tagged_yaml, field_types, read_tagged_yaml
 from corn_drake.errors import InputError
 
 
@@ -27,7 +27,7 @@ def _load_train_folder(folder):
 
 
 def _load_distill_folder(folder):
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.run_folders.config_file import run_config_path
 
     return load_config(DistillConfig, run_config_path(folder))
@@ -92,7 +92,7 @@ def test_a_retired_key_is_refused_in_a_run_folder_and_by_set(tmp_path, class_nam
 def test_an_agent_checkpoint_of_retired_point_locations_is_refused():
     """A checkpoint written by a run of cloud-point locations (before they were retired) names
     them: loading it into the patch agent is refused rather than misread."""
-    from corn_drake.nn.encoder_files import make_policy_encoder
+    from corn_drake.nn.encoders.encoder_files import make_policy_encoder
     from corn_drake.rl.primitive.agent import PrimitiveAgent
 
     agent = PrimitiveAgent(make_policy_encoder("corn"), hidden=32)

@@ -125,7 +125,7 @@ def test_energy_meter_is_built_only_when_the_task_pays_for_energy():
     """With energy_coef 0 the diagram has no meter (it would run every physics step for a term
     multiplied by zero), and the reward is the same as with a meter and coefficient 0."""
     from corn_drake.builders.teacher import build_teacher_diagram
-    from corn_drake.config.diagram_files import load_teacher_config
+    from corn_drake.config.plumbing.diagram_files import load_teacher_config
     from corn_drake.rl.envs.teacher_env import TeacherEnv
 
     def names(cfg):

@@ -7,15 +7,15 @@ import pickle
 import pytest
 import yaml
 
-from corn_drake.config import diagram_files as run_config
+from corn_drake.config.plumbing import diagram_files as run_config
 from corn_drake.cli import main
 from corn_drake.config.scene import ObjectConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import TrainConfig
-from corn_drake.config.yaml_io import config_fields
+from corn_drake.config.plumbing.yaml_io import config_fields
 from corn_drake.errors import InputError
-from corn_drake.config.overrides import apply_sets, config_changes
-from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.config.plumbing.overrides import apply_sets, config_changes
+from corn_drake.config.plumbing.diagram_files import load_teacher_config
 from corn_drake.run_folders.config_file import load_run_config
 
 # A task overlay: only what differs from the base (keys every TaskConfig keeps).
@@ -203,7 +203,7 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
     data = json.loads(report.read_text())
     assert (data["task"], data["action_step"]) == ("full6d", 0.06)
     # `curves` labels the run with its policy and task, from the same config.
-    from corn_drake.commands.curves import run_history
+    from corn_drake.commands.reporting.curves import run_history
 
     assert run_history(run)[0] == "state on mytask (run)"
 
@@ -211,7 +211,7 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
 def test_overrides_apply_to_any_run_config_and_refuse_unknown_keys():
     # The one override mechanism serves DistillConfig as well as TrainConfig: its env sections
     # are named without `env.`, and the config given is not modified.
-    from corn_drake.config.overrides import apply_sets
+    from corn_drake.config.plumbing.overrides import apply_sets
     from corn_drake.config.training import DistillConfig
 
     cfg = DistillConfig()

@@ -24,8 +24,7 @@ EXAMPLE = {"train": str(WEIGHTS / "push_state"), "distill": str(WEIGHTS / "push_
 # What a flag's value looks like on the command line.
 VALUES = {"perception": ["--perception", "geometric"], "attention": ["--attention"],
           "stochastic": ["--stochastic"], "workers": ["--workers", "2"],
-          "ray_address": ["--ray-address", "127.0.0.1:1"],
-          "episodes_from": ["--episodes-from", "1"]}
+          "ray_address": ["--ray-address", "127.0.0.1:1"]}
 
 
 def test_every_kind_is_declared_and_has_an_example():
@@ -77,10 +76,10 @@ def test_a_new_kind_is_one_entry_listed_by_the_help(monkeypatch, capsys):
 
 
 # The commands that load a run go through the registry, never a kind's loader or its name.
-THROUGH_THE_REGISTRY = ["commands/evaluate.py", "commands/gallery.py", "commands/ship.py",
-                        "evaluation/shipping.py", "commands/distill.py", "commands/demo.py",
-                        "commands/collect_outcomes.py", "commands/fit_outcome.py",
-                        "commands/label.py", "bench/planner.py"]
+THROUGH_THE_REGISTRY = ["commands/evaluate.py", "commands/reporting/gallery.py", "commands/reporting/ship.py",
+                        "evaluation/shipping.py", "commands/learning/distill.py", "commands/demo.py",
+                        "commands/datasets/collect_outcomes.py", "commands/learning/fit_outcome.py",
+                        "commands/datasets/label.py", "bench/episodes/planner.py"]
 
 
 @pytest.mark.parametrize("module", THROUGH_THE_REGISTRY)

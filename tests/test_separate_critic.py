@@ -51,7 +51,7 @@ def test_the_value_comes_from_the_critic_head_and_the_mean_from_the_actor():
 
 def test_the_separate_critic_is_the_default_as_the_shipped_runs_were_trained():
     """One source for the number: PPOConfig's default, which the agent takes too."""
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.config.training import TrainConfig
     from corn_drake.package_data import data_dir
 

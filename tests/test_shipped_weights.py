@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from corn_drake.cli import main
-from corn_drake.commands.ship import library_arguments
+from corn_drake.commands.reporting.ship import library_arguments
 from corn_drake.package_data import data_dir
 from corn_drake.run_folders.config_file import load_run_config
 
@@ -48,7 +48,7 @@ def test_card_matches_its_report_its_checkpoint_and_its_files(card_path):
     assert not report.get("overrides")
     # An outcome-model folder reads a sibling shipped folder's actor and critic (agent_weights).
     if card.get("chooser") == "outcome_model":
-        from corn_drake.config.loader import load_config
+        from corn_drake.config.plumbing.loader import load_config
         from corn_drake.config.primitive import PrimitiveTrainConfig
 
         weights = folder / load_config(PrimitiveTrainConfig, folder / "config.yaml").agent_weights

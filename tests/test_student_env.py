@@ -5,7 +5,7 @@ import pytest
 
 from corn_drake.contract import (ACTION_DIM, OBS_KEYS, ROBOT_STATE_DIM, STUDENT_OBS_KEYS,
                                  observation_shapes)
-from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.plumbing.diagram_files import load_student_config
 from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import TeacherEnv
 from corn_drake.rl.envs.student_env import StudentEnv

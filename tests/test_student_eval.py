@@ -15,13 +15,13 @@ import torch
 from corn_drake.cli import main
 from corn_drake.config.training import DistillConfig
 from corn_drake.contract import STUDENT_OBS_KEYS
-from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.plumbing.diagram_files import load_student_config
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.nn.student import StudentPolicy
 from corn_drake.nn.threads import torch_threads
 from corn_drake.rl.envs.student_env import StudentEnv
 from corn_drake.run_folders.config_file import write_run_config
-from corn_drake.systems.ik import ActionScaling
+from corn_drake.systems.control.ik import ActionScaling
 from tests.fixtures import one_error_line
 
 
@@ -178,7 +178,7 @@ def test_evaluate_a_distill_run_reports_perception_and_tracking(tmp_path, capsys
 
     assert main(["evaluate", "--run", str(run), "--episodes", "1", "--record", "0",
                  "--perception", "ground_truth", "--set", "task.episode_steps=2",
-                 "--report", str(report)]) == 0
+                 "--report", str(report), "--overwrite"]) == 0  # other settings: afresh
     data = json.loads(report.read_text())
     assert data["perception"] == "ground_truth" and data["episodes"][0]["steps"] <= 2
     assert [o["key"] for o in data["overrides"]] == ["env.task.episode_steps"]

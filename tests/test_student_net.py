@@ -9,9 +9,10 @@ import torch
 from corn_drake.contract import (ACTION_DIM, CONTEXT_DIM, CONTEXT_KEYS, STUDENT_OBS_KEYS,
                                  observation_size, student_observation_shapes)
 from corn_drake.errors import InputError
-from corn_drake.nn.corn_encoder import CORNEncoder
-from corn_drake.nn.encoder_files import NormalizedEncoder, make_policy_encoder, save_encoder
-from corn_drake.nn.input_normalization import InputNormalization
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.encoder_files import (NormalizedEncoder, make_policy_encoder,
+                                                  save_encoder)
+from corn_drake.nn.encoders.input_normalization import InputNormalization
 from corn_drake.nn.student import PARAMETER_GROUPS, PRETRAINED_GROUPS, TOKEN_KEYS, StudentPolicy
 from corn_drake.nn.student_io import student_from_encoder
 

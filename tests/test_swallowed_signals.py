@@ -69,7 +69,7 @@ def test_a_command_that_swallowed_the_stop_still_exits_with_the_signal(monkeypat
             pass
         return 0
 
-    from corn_drake.commands import merge_reports
+    from corn_drake.commands.reporting import merge_reports
 
     monkeypatch.setattr(merge_reports, "run", swallowing_run)
     assert cli.main(["merge-reports", "x.rows.jsonl", "--report", "y.json"]) == 128 + 15

@@ -9,10 +9,10 @@ import yaml
 from corn_drake import DIAGRAMS_DIR
 from corn_drake.config.task import TaskConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
-from corn_drake.config.loader import load_config
+from corn_drake.config.plumbing.loader import load_config
 from corn_drake.errors import InputError
-from corn_drake.config.overrides import apply_sets, config_changes
-from corn_drake.config.diagram_files import available_tasks, load_teacher_config
+from corn_drake.config.plumbing.overrides import apply_sets, config_changes
+from corn_drake.config.plumbing.diagram_files import available_tasks, load_teacher_config
 from corn_drake.scene.objects import box_spec
 from corn_drake.tasks.sampling import TABLE_MARGIN, sample_object_and_goal, sample_robot_joints
 from corn_drake.config.task import Full6dGoal, PlanarGoal, PushFromHandGoal
@@ -215,7 +215,7 @@ def test_task_overlays_choose_their_goal_variant():
 def test_a_tagged_config_round_trips_through_yaml_dump():
     from pydrake.common.yaml import yaml_dump_typed
 
-    from corn_drake.config.yaml_io import config_fields
+    from corn_drake.config.plumbing.yaml_io import config_fields
 
     cfg = load_teacher_config("push")
     again = load_config(TeacherDiagramConfig, text=yaml_dump_typed(cfg))

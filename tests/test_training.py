@@ -51,7 +51,7 @@ def test_resume_continues_at_the_same_step_with_the_same_optimizer(tmp_path):
     # `corn-drake curves` overlays runs from their checkpoints; a folder that is no run is named.
     from argparse import Namespace
 
-    from corn_drake.commands import curves
+    from corn_drake.commands.reporting import curves
 
     png = tmp_path / "both.png"
     assert curves.run(Namespace(runs=[str(tmp_path), str(tmp_path)], out=str(png), x="steps",

@@ -21,13 +21,13 @@ from typing import Callable
 
 import numpy as np
 
-from corn_drake.config.bounds import check_bounds
+from corn_drake.config.plumbing.bounds import check_bounds
 from corn_drake.assets.build_pool import in_plan_order
 from corn_drake.assets.families import CONVEX_FAMILIES, FAMILIES, UNSEEN_FAMILIES, make_family_mesh
 from corn_drake.assets.ingest import SUPPORTED, Rejected, find_mesh_files, load_watertight
 from corn_drake.assets.manifest import (LibraryObject, Manifest, Rejection, library_file,
                                         manifest_path, read_manifest, write_manifest)
-from corn_drake.assets.process import ProcessConfig, process_object
+from corn_drake.assets.processing.process import ProcessConfig, process_object
 from corn_drake.errors import InputError, MissingInputError
 from corn_drake.assets.splits import INGESTED_FAMILY, MEMBER_FRACTION, assign_splits
 from corn_drake.scene.objects import ObjectSpec

@@ -60,7 +60,7 @@ class LibraryObject:
     hull_repairs: list[str] = dataclasses.field(default_factory=list)
     num_hulls: int | None = None
     num_stable_poses: int | None = None
-    drops: dict | None = None  # stable-pose drop statistics (assets/stable_poses.py)
+    drops: dict | None = None  # stable-pose drop statistics (assets/processing/stable_poses.py)
     stable_pose_kept_fraction: float | None = None
     hull_volume_ratio: float | None = None
     coacd_runs: int | None = None

@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 
 from corn_drake.assets.ingest import TABLETOP_ACROSS, Rejected, detect_unit
-from corn_drake.assets.process import ProcessConfig
+from corn_drake.assets.processing.process import ProcessConfig
 
 
 @dataclasses.dataclass

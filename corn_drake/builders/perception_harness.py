@@ -14,10 +14,10 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.contract import ACTION_DIM
 from corn_drake.builders.student import StudentDiagram, build_student_diagram
-from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.plumbing.diagram_files import load_student_config
 from corn_drake.scene.objects import TABLE_TOP_Z, ObjectSpec
-from corn_drake.systems.pose_tracker import TrackerState, pose_error
-from corn_drake.systems.segmentation import SegmentationStats
+from corn_drake.systems.perception.pose_tracker import TrackerState, pose_error
+from corn_drake.systems.perception.segmentation import SegmentationStats
 from corn_drake.timing import clock_of
 
 # An arm pose with the hand above the table's near half: in view of all three cameras.

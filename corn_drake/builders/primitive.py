@@ -24,7 +24,7 @@ from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.object_surface import ObjectSurface
-from corn_drake.systems.primitive_executor import PrimitiveExecutor
+from corn_drake.systems.control.primitive_executor import PrimitiveExecutor
 from corn_drake.timing import clock_of
 
 
@@ -56,7 +56,7 @@ def build_primitive_diagram(cfg: TeacherDiagramConfig, primitive: PrimitiveConfi
     if agent is None:
         builder.ExportInput(executor.GetInputPort("primitive"), "executor.primitive")
     else:
-        from corn_drake.systems.primitive_policy import PrimitivePolicySystem
+        from corn_drake.systems.policies.primitive_policy import PrimitivePolicySystem
 
         policy = builder.AddNamedSystem("policy", PrimitivePolicySystem(agent, num_points, clock))
         for port, source in (("observation", teacher.observations.GetOutputPort("observation")),

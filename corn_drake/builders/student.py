@@ -23,7 +23,7 @@ from pydrake.common import RandomDistribution
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, RandomSource
 
-from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.plumbing.diagram_files import load_student_config
 from corn_drake.config.student import StudentDiagramConfig
 from corn_drake.contract import (FREE_BODY_POSITION, FREE_BODY_QUATERNION, FREE_BODY_STATE_DIM,
                                  POSE7_DIM, POSE7_POSITION, POSE7_QUATERNION, STUDENT_OBS_KEYS)
@@ -31,9 +31,9 @@ from corn_drake.builders.teacher import TeacherDiagram, add_teacher_systems, clo
 from corn_drake.scene.builder import Scene
 from corn_drake.timing import clock_of
 from corn_drake.scene.objects import ObjectSpec
-from corn_drake.systems.cameras import CameraRig, add_camera_rig, remove_perception_role
-from corn_drake.systems.pose_tracker import PoseTracker
-from corn_drake.systems.segmentation import ObjectSegmentation, robot_link_primitives
+from corn_drake.systems.perception.cameras import CameraRig, add_camera_rig, remove_perception_role
+from corn_drake.systems.perception.pose_tracker import PoseTracker
+from corn_drake.systems.perception.segmentation import ObjectSegmentation, robot_link_primitives
 from corn_drake.systems.student_observations import StudentObservations
 
 
@@ -150,7 +150,8 @@ def build_student_diagram(cfg: StudentDiagramConfig | None = None, spec: ObjectS
     for key in STUDENT_OBS_KEYS:
         builder.ExportOutput(obs.GetOutputPort(key), f"student.{key}")
     if student is not None:
-        from corn_drake.systems.student_policy import StudentPolicySystem  # torch: only here
+        # torch: only here
+        from corn_drake.systems.policies.student_policy import (StudentPolicySystem)
 
         policy = builder.AddNamedSystem("policy", StudentPolicySystem(
             student, n, clock_of(cfg.teacher.scene.physics), stochastic_policy))

@@ -24,13 +24,13 @@ from corn_drake.config.scene import ObjectConfig
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, NUM_JOINTS
 from corn_drake.errors import InputError
-from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.config.plumbing.diagram_files import load_teacher_config
 from corn_drake.scene.builder import Scene, build_scene
 from corn_drake.scene.objects import ObjectSpec, box_spec, cylinder_spec
 from corn_drake.scene.randomization import apply_physics
-from corn_drake.systems.energy_meter import add_energy_meter
-from corn_drake.systems.ik import ActionToJointTargets
-from corn_drake.systems.impedance_controller import make_impedance_controller
+from corn_drake.systems.control.energy_meter import add_energy_meter
+from corn_drake.systems.control.ik import ActionToJointTargets
+from corn_drake.systems.control.impedance_controller import make_impedance_controller
 from corn_drake.systems.observations import OBS_KEYS, TeacherObservations
 from corn_drake.systems.reward import TaskReward, add_task_reward, reset_previous
 from corn_drake.tasks.episode import Episode
@@ -228,7 +228,7 @@ def build_teacher_diagram(cfg: TeacherDiagramConfig | None = None, spec: ObjectS
     outputs its attention and an AttentionView named "attention_view" paints it on the object's
     cloud in Meshcat every policy step (viz/attention_view.py).
     """
-    from corn_drake.systems.policy import PolicySystem
+    from corn_drake.systems.policies.policy import PolicySystem
 
     if stochastic_policy and agent is None:
         raise ValueError("stochastic_policy needs an agent: without one the action is an input")

@@ -17,10 +17,14 @@ HELP = "measure speed/memory; writes a JSON report with the figure and its same-
 
 
 def _bench_modules():
-    for info in sorted(pkgutil.iter_modules(bench_pkg.__path__), key=lambda m: m.name):
-        if info.name.startswith("_") or info.name == "report":
+    """Every module of bench/ and its role folders that defines a benchmark (NAME and run), in
+    the order of their names."""
+    found = pkgutil.walk_packages(bench_pkg.__path__, f"{bench_pkg.__name__}.")
+    for info in sorted(found, key=lambda m: m.name.rsplit(".", 1)[-1]):
+        short = info.name.rsplit(".", 1)[-1]
+        if info.ispkg or short.startswith("_") or short == "report":
             continue
-        module = importlib.import_module(f"{bench_pkg.__name__}.{info.name}")
+        module = importlib.import_module(info.name)
         if hasattr(module, "NAME") and hasattr(module, "run"):
             yield module
 

@@ -111,7 +111,7 @@ def run(args) -> int:
 
 def _run(args, out: Path) -> int:
     from corn_drake.assets.library import build_procedural
-    from corn_drake.assets.process import ProcessConfig
+    from corn_drake.assets.processing.process import ProcessConfig
     from corn_drake.config.pretraining import PretrainConfig
     from corn_drake.contact.runner import generate_dataset
     from corn_drake.pretraining.contact import Pretrainer
@@ -187,8 +187,8 @@ def policy_config(library: Path, args):
     """The demo policy's PrimitiveTrainConfig: `train --policy primitive --task push` on the
     demo library, with the demo's encoder (a few hundred pretraining steps: below the F1 bar
     by design) copied into the run folder as encoder.pt."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
-    from corn_drake.config.overrides import on_library
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.overrides import on_library
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.rl.checkpoints import OWN_ENCODER
 

@@ -67,8 +67,10 @@ def add_arguments(parser):
                         help="--run planner only: a Ray cluster's address for --workers "
                              "(default: a Ray of this process's own)")
     parser.add_argument("--episodes-from", type=nonnegative_int, default=0, metavar="K",
-                        help="--run planner only: play episodes K..--episodes-1 (to spread "
-                             "them over processes; a rerun resumes REPORT.rows.jsonl)")
+                        help="play episodes K..--episodes-1 only (to spread them over "
+                             "processes; merge-reports joins the parts). Every evaluation "
+                             "appends its episodes to REPORT.rows.jsonl as they end, and a "
+                             "rerun with the same settings resumes it")
     parser.add_argument("--record", type=nonnegative_int, default=1, metavar="N",
                         help="the first N episodes saved as Meshcat HTML in REPORT_recordings/ beside the "
                              "report (0: none)")
@@ -107,8 +109,9 @@ def add_arguments(parser):
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--report", required=True, help="JSON report path")
     parser.add_argument("--overwrite", action="store_true",
-                        help="replace whatever --report holds (default: only a new path or a "
-                             "report of the same --run is written)")
+                        help="replace whatever --report holds, its rows file too, and "
+                             "start the episodes afresh (default: only a new path or a report "
+                             "of the same --run is written, and its rows resume)")
 
 
 def _whole_library(obj) -> str:
@@ -175,7 +178,7 @@ def run(args) -> int:
 # their dest, with how a user spells them.
 KIND_FLAGS = {"perception": "--perception", "attention": "--attention",
               "stochastic": "--stochastic", "workers": "--workers",
-              "ray_address": "--ray-address", "episodes_from": "--episodes-from"}
+              "ray_address": "--ray-address"}
 
 
 def _refuse_flags(args, kind) -> None:
@@ -233,6 +236,8 @@ def _evaluate(args, report_path: Path, out_dir: Path):
     from corn_drake.storage.output_owners import check_report_owner
 
     check_report_owner(report_path, str(args.run), args.overwrite)
+    if args.overwrite:  # what the report's rows (and labels) were is replaced with it
+        _remove_rows_of(report_path)
     meshcat = _open_meshcat() if args.keep_open else None
 
     def complete_report(report: dict) -> dict:
@@ -259,11 +264,23 @@ def _evaluate(args, report_path: Path, out_dir: Path):
                                       workers=args.workers, ray_address=args.ray_address,
                                       library=Path(args.objects) if args.objects else None)
         else:
+            from corn_drake.evaluation.episode_rows import rows_path_of
+            from corn_drake.evaluation.episodes import report_facts
+
+            # What makes this evaluation (a rerun with the same resumes its rows, another is
+            # refused): the diagram, the episodes' objects and seed, the weights, the overrides.
+            settings = {"runner": "diagram", **report_facts(cfg), "seed": args.seed,
+                        "objects": [o for o, _ in objects], "run": str(args.run),
+                        "policy": loaded.policy, **extra,
+                        "overrides": [dataclasses.asdict(change) for change in overrides],
+                        "actions": "sampled" if args.stochastic else "mean"}
             with torch_threads(args.torch_threads):
-                report = evaluate(loaded.agent, cfg, objects, args.episodes, args.record,
+                report = evaluate(loaded.agent, cfg, objects,
+                                  range(args.episodes_from, args.episodes), args.record,
                                   args.seed, out_dir, stochastic=args.stochastic,
                                   attention=args.attention, meshcat=meshcat,
-                                  progress=not args.no_progress)
+                                  progress=not args.no_progress,
+                                  rows_path=rows_path_of(report_path), settings=settings)
     except BaseException as e:  # noqa: BLE001 - an interrupt after some episodes: keep them
         partial = getattr(e, "partial_report", None)
         if partial is not None:
@@ -279,11 +296,23 @@ def _evaluate(args, report_path: Path, out_dir: Path):
     print(f"success {report['success_rate']:.2f} (balanced {report['balanced_success_rate']:.2f}) "
           f"over {len(report['episodes'])} episodes, {report['successes_ending_still']} of "
           f"{successes} successes ending at rest; report {report_path}")
-    recorded = min(args.record, args.episodes)
+    recorded = sum(r.get("recording") is not None for r in report["episodes"])
     if recorded:  # the HTML files are the evaluation's pictures: say where they are
         print(f"recordings: {recorded} episode(s) as Meshcat HTML in {out_dir}/ (open one in a "
               "browser; its animation controls replay the episode)")
     return meshcat
+
+
+def _remove_rows_of(report_path: Path) -> None:
+    """The rows and labels files of REPORT (episode_rows.py), which --overwrite replaces with
+    the report: the evaluation starts afresh."""
+    from corn_drake.evaluation.episode_rows import rows_path_of
+    from corn_drake.evaluation.planner_episodes import labels_path_of
+    from corn_drake.rl.planner.labels import plain_path_of
+
+    rows = rows_path_of(report_path)
+    for path in (rows, labels_path_of(rows), plain_path_of(labels_path_of(rows))):
+        path.unlink(missing_ok=True)
 
 
 def _library_record(args, env_cfg) -> dict | None:

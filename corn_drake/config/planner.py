@@ -17,7 +17,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 
 import dataclasses as dc
 
-from corn_drake.config.bounds import check_bounds, relation, subset_of
+from corn_drake.config.plumbing.bounds import check_bounds, relation, subset_of
 from corn_drake.config.choices import PLANNER_SOURCES
 from corn_drake.config.primitive import PrimitiveConfig
 from corn_drake.config.teacher import TeacherDiagramConfig

@@ -9,7 +9,7 @@ real types on the fields.
 
 import dataclasses as dc
 
-from corn_drake.config.bounds import check_bounds, one_of, relation
+from corn_drake.config.plumbing.bounds import check_bounds, one_of, relation
 from corn_drake.errors import InputError
 
 # The contact-pretrained encoders (`pretrain --model corn|pointnet`).
@@ -23,7 +23,7 @@ _SCHEDULE = (relation("min_lr", "<= {lr}", lambda low, lr: low <= lr, "lr"),
 @dc.dataclass
 class PretrainConfig:
     """Contact pretraining (paper: AdamW 2e-4, wd 5e-4, batch 1024, cosine schedule + warm-up)."""
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
     # traceback after the config was written): a batch 16x the paper's 1024; a million held-out samples.
     BOUNDS = {"steps": ">= 1",
@@ -59,7 +59,7 @@ TARGET_NORMS = ("instance", "layer")
 
 @dc.dataclass
 class PretextConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
     # traceback after the config was written): a batch 16x the contact pretraining's 1024; a million held-out samples.
     BOUNDS = {"steps": ">= 1",

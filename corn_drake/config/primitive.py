@@ -3,7 +3,7 @@ executor's and the primitive env's), and what a primitive training run records
 (PrimitiveTrainConfig, `corn-drake train --policy primitive`, RUN/config.yaml).
 
 A primitive: a contact location on the object's cloud (a point with its outward surface normal)
-and a push motion. The executor (systems/primitive_executor.py) moves the tool up to `clearance`
+and a push motion. The executor (systems/control/primitive_executor.py) moves the tool up to `clearance`
 above the object's top, across to above the pre-contact point (`pre_contact_distance` off the
 surface along the normal), down to it, pushes by the motion over `push_steps` policy periods and
 lifts `retreat_height`. Distances are metres; step counts are policy periods (0.1 s).
@@ -13,7 +13,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 
 import dataclasses as dc
 
-from corn_drake.config.bounds import check_bounds, one_of, relation
+from corn_drake.config.plumbing.bounds import check_bounds, one_of, relation
 from corn_drake.config.choices import PRIMITIVE_CHOOSERS, PRIMITIVE_POLICY
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.config.training import RunSettings
@@ -35,7 +35,7 @@ def at_rest(speed: dict, linear: float = REST_LINEAR_SPEED,
 
 @dc.dataclass
 class PrimitiveConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Upper bounds: distances within the table's reach (push_distance=1e300 was taken and
     # then failed deep in the planner), counts an episode can play.
     BOUNDS = {"pre_contact_distance": "(0, 0.2]", "clearance": "(0, 0.5]",
@@ -100,7 +100,7 @@ class PrimitiveConfig:
     progress_reward: float = 10.0
     # Side pushes aim this high above the table (m; the tool point), lowered from the chosen
     # contact point as far as the object's cloud leaves room for the fingers
-    # (systems/low_push.py: a push at mid-height tips an upright bottle or a tall box, one near
+    # (systems/control/low_push.py: a push at mid-height tips an upright bottle or a tall box, one near
     # the table slides it). 0: push at the chosen point's own height. 0.02: what the shipped
     # push_turn_primitive and full6d_outcome ran with (the primitive results log, items 10, 15).
     push_height: float = 0.02

@@ -8,11 +8,12 @@ RETIRED maps (config class name, field name) to why it went: the measurement tha
 
 import typing
 
-from corn_drake.config.yaml_io import field_types
+from corn_drake.config.plumbing.yaml_io import field_types
 from corn_drake.errors import InputError
 
 # Each entry: the field as it stood, and the measurement that removed it (the project's own
-# reports; docs/experiments_log.md has the rows).
+# reports; experiments/LOG.md and, for "item N", experiments/primitive_policy/LOG.md have the
+# rows).
 RETIRED: dict[tuple[str, str], str] = {
     # The primitive env's reward terms and the executor's options (the primitive results log).
     ("PrimitiveConfig", "turn_reward"):

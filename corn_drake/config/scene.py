@@ -9,11 +9,11 @@ import typing
 
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from corn_drake.config.bounds import one_of, relation
+from corn_drake.config.plumbing.bounds import one_of, relation
 from corn_drake.config.choices import (COMPLIANT_BODIES, CONTACT_MODELS,
                                        CONTACT_SURFACE_REPRESENTATIONS,
                                        DISCRETE_CONTACT_APPROXIMATIONS, TORQUE_BACKENDS)
-from corn_drake.config.yaml_io import pickle_as_yaml
+from corn_drake.config.plumbing.yaml_io import pickle_as_yaml
 from corn_drake.contract import NUM_JOINTS
 from corn_drake.errors import InputError
 from corn_drake.timing import whole_multiple
@@ -35,7 +35,7 @@ def _plant_config() -> MultibodyPlantConfig:
 
 @dc.dataclass
 class PhysicsConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {
               "policy_period": "> 0", "object_hydroelastic_modulus": "> 0",
               "table_hydroelastic_modulus": "> 0", "table_resolution_hint": "> 0",
@@ -98,7 +98,7 @@ LIBRARY_OBJECTS = ("one", "train")
 
 @dc.dataclass
 class ObjectConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
     # was written): 65536 points a cloud, 128x the policy's 512.
     BOUNDS = {"radius": "> 0",
@@ -151,7 +151,7 @@ class ObjectConfig:
 
 @dc.dataclass
 class RandomizationConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {"mass": "range > 0",
               "object_friction": "range >= 0", "table_friction": "range >= 0",
               "finger_friction": "range >= 0", "restitution": "range [0, 1]",
@@ -181,7 +181,7 @@ class RandomizationConfig:
 
 @dc.dataclass
 class ControllerConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {
               "max_position_delta": "> 0", "max_rotation_delta": "> 0", "kp_range": "range > 0",
               "rho_range": "range >= 0", "ik_damping": ">= 0", "ee_clamp": "> 0",
@@ -199,13 +199,13 @@ class ControllerConfig:
     effort_limits: list[float] = dc.field(
         default_factory=lambda: [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
     # "symbolic": the torque law compiled into a C++ SymbolicVectorSystem (fast);
-    # "python": the same law in a Python LeafSystem (see systems/impedance_controller.py).
+    # "python": the same law in a Python LeafSystem (see systems/control/impedance_controller.py).
     torque_backend: str = "symbolic"
 
 
 @dc.dataclass
 class SceneConfig:
-    # Range checks (config/bounds.py): the table box's extent (m) and the arm base's position.
+    # Range checks (config/plumbing/bounds.py): the table box's extent (m) and the arm base's position.
     BOUNDS = {"table_size": "vector 3 > 0", "robot_base": "vector 3 finite"}
     physics: PhysicsConfig = dc.field(default_factory=PhysicsConfig)
     object: ObjectConfig = dc.field(default_factory=ObjectConfig)

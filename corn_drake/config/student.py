@@ -14,10 +14,10 @@ import math
 
 from pydrake.systems.sensors import CameraConfig
 
-from corn_drake.config.bounds import check_bounds, one_of, relation
+from corn_drake.config.plumbing.bounds import check_bounds, one_of, relation
 from corn_drake.config.choices import CAMERA_MODES, SEGMENTATION_MODES  # noqa: F401 (re-exported)
 from corn_drake.config.teacher import TeacherDiagramConfig
-from corn_drake.config.yaml_io import pickle_as_yaml
+from corn_drake.config.plumbing.yaml_io import pickle_as_yaml
 from corn_drake.contract import ENCODER_INPUT_SCALE
 from corn_drake.errors import InputError
 
@@ -111,7 +111,7 @@ class CameraRigConfig:
     # renderer did: it rasterised the object only). Off by default: our links are primitives
     # (cheap to render) and the segmentation is supposed to remove them.
     hide_robot: bool = False
-    # Range checks (config/bounds.py): what check_bounds refuses. Of Drake's CameraConfig the
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses. Of Drake's CameraConfig the
     # rig relies on its image size and its clipping and depth ranges (check_camera has Drake's
     # own checks of the rest, and refuses the fields the rig ignores).
     # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
@@ -178,7 +178,7 @@ class SegmentationConfig:
     # eps are set for that density: a 640 x 480 rig took 1 s per frame without it.
     max_px_per_m: float = 250.0
     seed: int = 0
-    # Range checks (config/bounds.py): what check_bounds refuses. outlier_neighbours is a count
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses. outlier_neighbours is a count
     # (0 or 1 keeps every point).
     # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
     # was written): 65536 points a cloud, 128x the policy's 512.
@@ -218,7 +218,7 @@ class TrackerConfig:
     max_step_translation: float = 0.05
     max_step_rotation_deg: float = 30.0
     min_points: int = 20
-    # Range checks (config/bounds.py): what check_bounds refuses. The fitnesses are fractions of
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses. The fitnesses are fractions of
     # points.
     # Sizes have upper bounds (issue 63: an unbounded size ran out of memory after the config
     # was written): 65536 points a cloud, 128x the policy's 512.
@@ -245,7 +245,7 @@ class StudentObservationConfig:
     # Std of N(0, s) on the goal's position (its first 3 entries), in metres: the paper's
     # N(0, 0.005) goal-pose noise on the normalised input, 2 mm. (The authors' code sets 0.)
     goal_noise_std: float = 0.005 * NORMALISED_UNIT_M
-    # Range checks (config/bounds.py): standard deviations (m).
+    # Range checks (config/plumbing/bounds.py): standard deviations (m).
     BOUNDS = {"cloud_noise_std": ">= 0", "goal_noise_std": ">= 0"}
 
 

@@ -15,7 +15,7 @@ import dataclasses as dc
 import math
 import typing
 
-from corn_drake.config.bounds import check_bounds, relation
+from corn_drake.config.plumbing.bounds import check_bounds, relation
 from corn_drake.contract import NUM_JOINTS
 from corn_drake.errors import InputError
 
@@ -34,7 +34,7 @@ def _inside(region, low: float, high: float) -> bool:
 class Full6dGoal:
     """The paper's 6D task: the goal is any stable pose of the object (thin objects keep the one
     they start in: pushing cannot stand them up), any yaw, anywhere in the goal region."""
-    # Range checks (config/bounds.py): distances (m).
+    # Range checks (config/plumbing/bounds.py): distances (m).
     BOUNDS = {"object_min_distance_to_hand": ">= 0", "min_goal_distance": ">= 0"}
     # The object starts at least this far (xy, m) from the tool (official code).
     object_min_distance_to_hand: float = 0.12
@@ -47,7 +47,7 @@ class Full6dGoal:
 class PlanarGoal:
     """A planar goal: the object keeps the stable pose it starts in and is moved `distance` (m,
     in a uniformly random direction) and turned by up to +- `max_yaw` (rad)."""
-    # Range checks (config/bounds.py): distances (m), an angle (rad).
+    # Range checks (config/plumbing/bounds.py): distances (m), an angle (rad).
     BOUNDS = {"object_min_distance_to_hand": ">= 0", "distance": "range >= 0", "max_yaw": ">= 0"}
     object_min_distance_to_hand: float = 0.12
     distance: list[float] = dc.field(default_factory=lambda: [0.1, 0.2])
@@ -61,7 +61,7 @@ class PushFromHandGoal:
     of the hand-to-object direction, so one straight push reaches it; same stable pose, turned
     by up to +- `max_yaw`. The defaults are the push benchmark's (diagrams/tasks/push.yaml):
     the shortest push that still needs the hand to find the object, the goal keeping the yaw."""
-    # Range checks (config/bounds.py): distances (m), angles (rad).
+    # Range checks (config/plumbing/bounds.py): distances (m), angles (rad).
     BOUNDS = {"object_distance_to_hand": "range >= 0", "distance": "range >= 0",
               "heading_spread": ">= 0", "max_yaw": ">= 0"}
     object_distance_to_hand: list[float] = dc.field(default_factory=lambda: [0.08, 0.11])
@@ -77,7 +77,7 @@ GoalSpec = typing.Union[Full6dGoal, PlanarGoal, PushFromHandGoal]
 
 @dc.dataclass
 class TaskConfig:
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {
               "episode_steps": ">= 1", "success_position": "> 0", "success_orientation": "> 0",
               "robot_init_noise": ">= 0", "keypoint_k1": ">= 0", "keypoint_k2": ">= 0",

@@ -5,7 +5,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 
 import dataclasses as dc
 
-from corn_drake.config.bounds import check_bounds, relation
+from corn_drake.config.plumbing.bounds import check_bounds, relation
 from corn_drake.config.scene import ControllerConfig, RandomizationConfig, SceneConfig
 from corn_drake.config.task import TaskConfig
 from corn_drake.contract import TABLE_TOP_Z
@@ -32,7 +32,7 @@ class TeacherDiagramConfig:
     controller: ControllerConfig = dc.field(default_factory=ControllerConfig)
     task: TaskConfig = dc.field(default_factory=TaskConfig)
     seed: int = 0
-    # Range checks (config/bounds.py), and the relations between the scene and the task, which
+    # Range checks (config/plumbing/bounds.py), and the relations between the scene and the task, which
     # only this config holds both of: the workspace holds the table top the objects start on,
     # and every goal lies over the table (a goal off it is one no push can reach).
     BOUNDS = {"seed": "seed"}

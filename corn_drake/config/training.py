@@ -7,7 +7,7 @@ No `from __future__ import annotations`: yaml_load_typed needs real types on the
 import dataclasses as dc
 import typing
 
-from corn_drake.config.bounds import check_bounds, one_of, relation, subset_of
+from corn_drake.config.plumbing.bounds import check_bounds, one_of, relation, subset_of
 from corn_drake.config.choices import (POLICY_KINDS, PRIMITIVE_POLICY, STUDENT_ACTIONS,
                                        STUDENT_PARAMETER_GROUPS)
 from corn_drake.config.student import StudentDiagramConfig
@@ -39,7 +39,7 @@ class PPOConfig:
     holds the shared lr near 1e-5 and stops updates after 1-4 steps, so a shared critic never
     fits the returns (the results page, the one-step PPO probe).
     """
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {"gamma": "(0, 1]",
               "gae_lambda": "[0, 1]", "clip": "> 0", "epochs": ">= 1", "minibatches": ">= 1",
               "lr": "> 0", "lr_min": "> 0", "lr_max": "> 0", "kl_target": "> 0",
@@ -77,7 +77,7 @@ class RunSettings:
     and the learner's device. TrainConfig and DistillConfig inherit these fields, so their
     YAML keys stay flat (a run's config.yaml reads as before) and the two commands share one
     set of flags (arguments/run_flags.py) and bounds."""
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     BOUNDS = {
               # envs_per_worker: each env is a Drake diagram of ~60 MB; 100000 hung for minutes
               # building them before failing.
@@ -114,7 +114,7 @@ class RunSettings:
 
 @dc.dataclass
 class TrainConfig(RunSettings):
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
     # traceback after the config was written): 4096 steps of 256 envs' clouds is ~6 GB of rollout.
     BOUNDS = {
@@ -156,7 +156,7 @@ class TrainConfig(RunSettings):
 
 @dc.dataclass
 class DistillConfig(RunSettings):
-    # Range checks (config/bounds.py): what check_bounds refuses.
+    # Range checks (config/plumbing/bounds.py): what check_bounds refuses.
     # Sizes that allocate memory have upper bounds (issue 63: 1e9 ran into a MemoryError
     # traceback after the config was written): a BPTT window of 1024 steps keeps every step's activations.
     BOUNDS = {"window": "[1, 1024]",

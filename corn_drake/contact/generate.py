@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from corn_drake.config.bounds import relation
+from corn_drake.config.plumbing.bounds import relation
 from corn_drake.contact.gripper_sdf import GripperSDF
 from corn_drake.assets.library_clouds import ObjectCloud
 from corn_drake.transforms import quat_wxyz_to_matrix

@@ -12,6 +12,7 @@ notebooks and tests use the same two functions.
 from __future__ import annotations
 
 import dataclasses
+import json
 import zlib
 from collections import defaultdict
 from pathlib import Path
@@ -20,8 +21,7 @@ from typing import Callable
 import numpy as np
 
 from corn_drake.errors import InputError
-from corn_drake.evaluation.failures import (failure_category, failure_counts, motion_summary,
-                                            successes_ending_still)
+from corn_drake.evaluation.failures import failure_category, motion_summary
 
 
 @dataclasses.dataclass
@@ -159,52 +159,64 @@ def episode_seed(seed: int, object_id: str, repeat: int) -> int:
     return (seed + 10_007 * repeat + zlib.crc32(object_id.encode())) % 2**31
 
 
-def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir: Path, *,
-             stochastic: bool = False, attention: bool = False, meshcat=None,
-             progress: bool = False) -> dict:
-    """Runs `episodes` episodes of `agent` round-robin over `objects` [(object id, ObjectSpec)]
-    in the evaluation diagram of `cfg` (policy_env: a TeacherDiagramConfig and a teacher
-    agent, or a StudentDiagramConfig and a StudentPolicy); the first `record` are saved as
-    Meshcat HTML in `out_dir`. Episode k is the (k // len(objects))-th on its object, seeded
-    episode_seed(seed, object id, that count) and recorded in its row. The policy runs inside the
-    diagram; with `stochastic` it samples the actions, the noise drawn from the episode's seed.
-    With `attention` (a teacher that cross-attends: TeacherAgent.has_attention), its attention
-    is painted on the object's cloud every step, in the recordings and in the live Meshcat
-    (made even when `record` is 0). `meshcat`: the Meshcat to draw in (the caller's, e.g. one it
-    keeps open after the episodes); made here when recording or attention needs one. With
-    `progress`, a tqdm bar over the episodes (on stderr) counts the successes so far: a
-    200-episode student evaluation otherwise runs silently for minutes.
+def evaluate(agent, cfg, objects, episodes: int | range, record: int, seed: int, out_dir: Path,
+             *, stochastic: bool = False, attention: bool = False, meshcat=None,
+             progress: bool = False, rows_path: Path | None = None,
+             settings: dict | None = None) -> dict:
+    """Runs the episodes `episodes` (a range of k, or a count from 0) of `agent` round-robin
+    over `objects` [(object id, ObjectSpec)] in the evaluation diagram of `cfg` (policy_env: a
+    TeacherDiagramConfig and a teacher agent, or a StudentDiagramConfig and a StudentPolicy);
+    episodes k < `record` are saved as Meshcat HTML in `out_dir`. Episode k is the
+    (k // len(objects))-th on its object, seeded episode_seed(seed, object id, that count) and
+    recorded in its row. The policy runs inside the diagram; with `stochastic` it samples the
+    actions, the noise drawn from the episode's seed. With `attention` (a teacher that
+    cross-attends: TeacherAgent.has_attention), its attention is painted on the object's cloud
+    every step, in the recordings and in the live Meshcat (made even when `record` is 0).
+    `meshcat`: the Meshcat to draw in (the caller's, e.g. one it keeps open after the
+    episodes); made here when recording or attention needs one. With `progress`, a tqdm bar
+    over the episodes (on stderr) counts the successes so far.
 
-    Returns the report: task (the task's name), action_step (controller.max_position_delta,
-    the action's translation step at |a| = 1), success_rate, balanced_success_rate (mean over
-    objects), per_object, mean_episode_length, failure_counts (evaluation/failures.py), complete
-    and episodes_requested, and one row per episode (its failure category and the object's
-    motion among its keys). Interrupted (Ctrl-C, SIGTERM) after some episodes, the interrupt
-    goes on up carrying the report of the finished ones, complete false, as .partial_report. A student's report adds
-    perception (its segmentation: "geometric" or "ground_truth"), tracking (tracking_summary
-    over every step of every episode) and each row's tracking (that episode's summary).
+    With `rows_path` (REPORT.rows.jsonl, episode_rows.py) each finished episode's row is
+    appended at once under the header of `settings` (what makes the evaluation: the same
+    settings resume it, other settings are refused), and the episodes already there are not
+    played again.
+
+    Returns the report (policy_report): the keys every report shares (report_core.py), the
+    task's name and action_step, and a student's perception and tracking. Interrupted (Ctrl-C,
+    SIGTERM) after some episodes, the interrupt goes on up carrying the report of the finished
+    ones, complete false, as .partial_report.
     """
+    from corn_drake.evaluation.episode_rows import append_row, claim_range, read_rows
     from corn_drake.rl.envs.student_env import StudentEnv
 
+    episodes = range(episodes) if isinstance(episodes, int) else episodes
     if not objects:
         raise InputError("evaluate: no objects to evaluate on")
-    if episodes < 1:
-        raise InputError(f"evaluate: episodes must be >= 1, got {episodes}")
+    if len(episodes) < 1:
+        raise InputError(f"evaluate: no episodes in [{episodes.start}, {episodes.stop})")
     if attention and not getattr(agent, "has_attention", False):
         raise InputError(f"evaluate: attention needs a policy that cross-attends over patches "
                          f"(corn, e2e), got {getattr(agent, 'kind', type(agent).__name__)!r}")
+    rows = []
+    if rows_path is not None:
+        settings = json.loads(json.dumps(settings))  # as it reads back
+        rows = [r for r in read_rows(rows_path, settings) if r["episode"] in episodes]
+        claim_range(rows_path, settings, episodes, read_rows(rows_path, settings))
+    done = {r["episode"] for r in rows}
     if meshcat is None and (record > 0 or attention):
         from pydrake.geometry import Meshcat
 
         meshcat = Meshcat()
     from tqdm import tqdm
 
-    per_object, rows, tracked = defaultdict(list), [], []
     envs = {}
-    bar = tqdm(total=episodes, desc="episodes", unit="episode", disable=not progress)
+    bar = tqdm(total=len(episodes), initial=len(done), desc="episodes", unit="episode",
+               disable=not progress)
     interrupted = None
     try:
-        for k in range(episodes):
+        for k in episodes:
+            if k in done:
+                continue
             object_id, spec = objects[k % len(objects)]
             if object_id not in envs:
                 envs[object_id] = policy_env(cfg, spec, meshcat, agent, stochastic, seed, attention)
@@ -212,23 +224,24 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
             path = out_dir / f"episode_{k:03d}_{object_id}.html" if k < record else None
             episode_seed_k = episode_seed(seed, object_id, k // len(objects))
             result = run_episode(env, seed=episode_seed_k, record_path=path)
-            per_object[object_id].append(result.success)
-            rows.append({"episode": k, "object": object_id, "seed": episode_seed_k,
-                         "success": result.success,
-                         "steps": result.steps, "return": result.total_reward,
-                         "position_error": result.status.get("position_error"),
-                         "orientation_error": result.status.get("orientation_error"),
-                         "sim_error": result.sim_error,
-                         "out_of_workspace": bool(result.status.get("out_of_workspace", 0) > 0),
-                         "motion": motion_summary(result.start_pose, result.end_pose,
-                                                  result.goal_pose),
-                         "end_speed": result.end_speed,
-                         "recording": (None if result.recording is None
-                                       else str(result.recording))})
-            rows[-1]["failure"] = failure_category(rows[-1], env.teacher_cfg.task)
+            row = {"episode": k, "object": object_id, "seed": episode_seed_k,
+                   "success": result.success,
+                   "steps": result.steps, "return": result.total_reward,
+                   "position_error": result.status.get("position_error"),
+                   "orientation_error": result.status.get("orientation_error"),
+                   "sim_error": result.sim_error,
+                   "out_of_workspace": bool(result.status.get("out_of_workspace", 0) > 0),
+                   "motion": motion_summary(result.start_pose, result.end_pose,
+                                            result.goal_pose),
+                   "end_speed": result.end_speed,
+                   "recording": None if result.recording is None else str(result.recording)}
+            row["failure"] = failure_category(row, env.teacher_cfg.task)
             if isinstance(env, StudentEnv):  # the student's pose tracking is part of its result
-                rows[-1]["tracking"] = tracking_summary(result.tracking)
-                tracked += result.tracking
+                row["tracking"] = tracking_summary(result.tracking)
+                row[TRACKING_STEPS] = tracking_columns(result.tracking)
+            if rows_path is not None:
+                append_row(rows_path, row)
+            rows.append(row)
             bar.set_postfix(successes=sum(r["success"] for r in rows), refresh=False)
             bar.update()
     except BaseException as e:  # noqa: BLE001 - Ctrl-C, SIGTERM (cli.Interrupted), not errors
@@ -238,23 +251,67 @@ def evaluate(agent, cfg, objects, episodes: int, record: int, seed: int, out_dir
         # (e.partial_report) and the interrupt goes on up.
         interrupted = e
     bar.close()
-    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
-    teacher_cfg = env.teacher_cfg
-    report = {"task": teacher_cfg.task.name,
-              "action_step": teacher_cfg.controller.max_position_delta,
-              "success_rate": float(np.mean([r["success"] for r in rows])),
-              "balanced_success_rate": float(np.mean(list(rates.values()))),
-              "per_object": rates,
-              "mean_episode_length": float(np.mean([r["steps"] for r in rows])),
-              "failure_counts": failure_counts(rows),
-              "successes_ending_still": successes_ending_still(rows),
-              "complete": interrupted is None, "episodes_requested": episodes,
-              "episodes": rows}
-    if isinstance(env, StudentEnv):
-        report.update({"perception": env.perception, "tracking": tracking_summary(tracked)})
+    report = policy_report(sorted(rows, key=lambda r: r["episode"]), episodes, report_facts(cfg))
     if interrupted is not None:
+        report["complete"] = False
         interrupted.partial_report = report
         raise interrupted
+    return report
+
+
+def _student_config_type():
+    from corn_drake.config.student import StudentDiagramConfig
+
+    return StudentDiagramConfig
+
+
+# A student's rows keep the tracking of every step (columns of TRACKING_STATS, as measured:
+# JSON gives a float back exactly) under this key, so a report of resumed or merged rows sums
+# its tracking over every step, as one process's does; the report's own rows leave it out.
+TRACKING_STEPS = "tracking_steps"
+
+
+def tracking_columns(steps: list[dict]) -> dict[str, list]:
+    from corn_drake.rl.envs.vec_env import TRACKING_STATS
+
+    return {**{k: [float(t[k]) for t in steps] for k in TRACKING_STATS},
+            "ok": [int(t["ok"] > 0) for t in steps]}
+
+
+def tracking_steps_of(rows: list[dict]) -> list[dict]:
+    """Every step's tracking of `rows`, as StudentEnv's info["tracking"] gives them."""
+    steps = []
+    for r in rows:
+        columns = r.get(TRACKING_STEPS) or {}
+        keys = list(columns)
+        steps += [dict(zip(keys, values)) for values in zip(*(columns[k] for k in keys))]
+    return steps
+
+
+def report_facts(cfg) -> dict:
+    """What a policy report says of the diagram its episodes ran in (`cfg`): the task's name,
+    the action's translation step at |a| = 1, and a student's segmentation (None for a
+    teacher). Kept in the rows file's settings too, so merged parts report the same."""
+    student = isinstance(cfg, _student_config_type())
+    teacher_cfg = cfg.teacher if student else cfg
+    return {"task": teacher_cfg.task.name,
+            "action_step": teacher_cfg.controller.max_position_delta,
+            "perception": cfg.segmentation.mode if student else None}
+
+
+def policy_report(rows: list[dict], requested, facts: dict) -> dict:
+    """The report of a policy's `rows` (sorted by episode) of the episodes `requested`, in the
+    diagram `facts` describes (report_facts): the task, its action step, the keys every report
+    shares (report_core.episode_report), and for a student its perception and its tracking
+    over every step of every episode."""
+    from corn_drake.evaluation.report_core import episode_report
+
+    report = {"task": facts["task"], "action_step": facts["action_step"],
+              **episode_report([{k: v for k, v in r.items() if k != TRACKING_STEPS}
+                                for r in rows], requested)}
+    if facts.get("perception") is not None:
+        report.update({"perception": facts["perception"],
+                       "tracking": tracking_summary(tracking_steps_of(rows))})
     return report
 
 

@@ -20,71 +20,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-from collections import Counter, defaultdict
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from corn_drake.errors import InputError
+from corn_drake.evaluation.episode_rows import (append_row, claim_range, read_rows,
+                                                 rows_path_of)
 from corn_drake.evaluation.episodes import episode_seed
-from corn_drake.evaluation.failures import failure_counts, successes_ending_still
 from corn_drake.evaluation.planner_play import Labeller, play
-from corn_drake.storage.atomic_files import write_json, write_text
-
-
-def read_rows(path: Path, settings: dict | None, repair: bool = True,
-              notes: list | None = None) -> list[dict]:
-    """The episode rows of `path` written with `settings` (None: whichever it names; read
-    `settings_of` for them). A last line that a kill cut short is dropped (its episode was not
-    finished): from the file too with `repair` (a resume), else only said in `notes`."""
-    if not path.exists():
-        return []
-    lines = path.read_text().splitlines()
-    records = []
-    for i, line in enumerate(lines):
-        if not line.strip():
-            continue
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            if i != len(lines) - 1:
-                raise InputError(f"{path}: line {i + 1} is not a JSON row; the file is damaged"
-                                 ) from None
-            if repair:
-                write_text(path, "".join(f"{json.dumps(r)}\n" for r in records))
-            elif notes is not None:
-                notes.append(f"{path}: its last line is cut short (a kill mid-write); that "
-                             "episode is not counted")
-    if not records or "settings" not in records[0]:
-        raise InputError(f"{path}: not a planner rows file (its first line names no settings)")
-    if settings is not None and records[0]["settings"] != settings:
-        raise InputError(f"{path} holds another planner evaluation's rows (other settings); "
-                         "choose another --report")
-    return records[1:]
-
-
-def claim_range(rows_path: Path, settings: dict, episodes: range, rows: list[dict]) -> None:
-    """Writes the rows file's header, {"settings", "requested": [first, stop)}: the episodes
-    this evaluation was asked for, which merge-reports checks a part against. A resume asks for
-    the same range or one holding it (the header then says the larger); another range is
-    refused, naming both. A file from before the header said its range gets one when all its
-    rows lie in the range asked for."""
-    header = {"settings": settings, "requested": [episodes.start, episodes.stop]}
-    if not rows_path.exists():
-        _append(rows_path, header)
-        return
-    lines = rows_path.read_text().splitlines()
-    before = json.loads(lines[0]).get("requested")
-    had = range(*before) if before else range(min((r["episode"] for r in rows), default=0),
-                                              max((r["episode"] for r in rows), default=-1) + 1)
-    if had.start < episodes.start or had.stop > episodes.stop:
-        if before or rows:
-            raise InputError(f"{rows_path} holds the evaluation of episodes {had.start}.."
-                             f"{had.stop - 1}; ask for a range holding it (--episodes-from "
-                             f"{had.start} --episodes {had.stop}) or give another --report")
-    if before != header["requested"]:
-        write_text(rows_path, "\n".join([json.dumps(header), *lines[1:]]) + "\n")
+from corn_drake.evaluation.report_core import episode_report
+from corn_drake.storage.atomic_files import write_json
 
 
 def read_labels_by_episode(path: Path, settings: dict) -> dict[int, dict]:
@@ -114,63 +61,25 @@ def labels_path_of(rows_path: Path) -> Path:
     return rows_path.with_name(rows_path.name.replace(".rows.jsonl", LABELS_SUFFIX))
 
 
-def settings_of(path: Path) -> dict:
-    lines = path.read_text().splitlines() if path.is_file() else []
-    if not lines:
-        raise InputError(f"{path}: no such planner rows file")
-    try:
-        return json.loads(lines[0])["settings"]
-    except (json.JSONDecodeError, KeyError, TypeError):
-        raise InputError(f"{path}: not a planner rows file (its first line names no settings)"
-                         ) from None
-
-
-def _append(path: Path, record: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(record) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
-
-
 def report_of(rows: list[dict], task, requested, facts: dict) -> dict:
-    """The report of `rows` (episodes of `requested`, a range or sorted list of k)."""
-    per_object = defaultdict(list)
-    for r in rows:
-        per_object[r["object"]].append(r["success"])
-    rates = {o: float(np.mean(s)) for o, s in per_object.items()}
+    """The report of `rows` (episodes of `requested`, a range or sorted list of k): the keys
+    every report shares (report_core.episode_report) and the expert's decisions and costs."""
     decisions = [d for r in rows for d in r["decisions"]]
-    n, k = len(rows), sum(r["success"] for r in rows)
-    return {"task": task.name, **facts,
-            "success_rate": float(k / n) if n else None,
-            "success_wilson_95": wilson(k, n),
-            "hacman_success_rate": float(np.mean([r["hacman_success"] for r in rows]))
-            if n else None,
-            "balanced_success_rate": float(np.mean(list(rates.values()))) if rates else None,
-            "per_object": rates,
-            "mean_episode_length": float(np.mean([r["steps"] for r in rows])) if n else None,
-            "failure_counts": failure_counts(rows),
-            "successes_ending_still": successes_ending_still(rows),
+    cpu = float(sum(r["cpu_seconds"] for r in rows))
+    shared = episode_report(rows, requested)
+    episodes = {k: shared.pop(k) for k in ("episodes_from", "episodes_requested", "complete",
+                                           "episodes")}
+    return {"task": task.name, **facts, **shared,
+            "hacman_success_rate": shared.get("hacman_success_rate"),
             "decisions": len(decisions),
             "simulated_per_decision": float(np.mean([d["simulated"] for d in decisions]))
             if decisions else None,
             "cpu_seconds_per_decision": float(np.mean([d["cpu_seconds"] for d in decisions]))
             if decisions else None,
-            "cpu_seconds": float(sum(r["cpu_seconds"] for r in rows)),
-            "decisions_per_core_hour": 3600.0 * len(decisions) / sum(
-                r["cpu_seconds"] for r in rows) if decisions else None,
+            "cpu_seconds": cpu,
+            "decisions_per_core_hour": 3600.0 * len(decisions) / cpu if decisions else None,
             "kinds_chosen": dict(sum((Counter(r["kinds_chosen"]) for r in rows), Counter())),
-            "episodes_from": min(requested, default=0), "episodes_requested": len(requested),
-            "complete": n == len(requested), "episodes": rows}
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> list[float] | None:
-    """The 95 % Wilson score interval of k successes in n."""
-    if n == 0:
-        return None
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [float(centre - half), float(centre + half)]
+            **episodes}
 
 
 def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_path: Path,
@@ -201,7 +110,7 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
                 "objects": [o for o, _ in objects],
                 **(labeller.facts if labeller is not None else {}), **(facts_more or {})}
     settings = json.loads(json.dumps(settings))  # as it reads back
-    rows_path = report_path.with_name(report_path.stem + ".rows.jsonl")
+    rows_path = rows_path_of(report_path)
     labels_path = labels_path_of(rows_path)
     rows = read_rows(rows_path, settings)
     # Another evaluation's labels: refused before any episode (and before any file changes).
@@ -227,7 +136,7 @@ def evaluate_planner(policy, cfg, objects, episodes: range, seed: int, report_pa
         # keeps an episode's last labels line.
         append_line(labels_path, {"episode": row["episode"], "object": row["object"],
                                   "seed": row["seed"], "decisions": row.pop("labels")})
-        _append(rows_path, row)
+        append_row(rows_path, row)
         rows.append(row)
         write_json(report_path, report_of(sorted(rows, key=lambda r: r["episode"]), cfg.task,
                                           episodes, facts))

@@ -1,8 +1,9 @@
-"""`corn-drake merge-reports`' core: one planner report (or one round of labels) from the rows
-files of the parts that split runs played (`--episodes-from`), believed only as far as checked.
+"""`corn-drake merge-reports`' core: one report (a policy's or the 6D expert's, or one round of
+labels) from the rows files of the parts that split runs played (`--episodes-from`), believed
+only as far as checked.
 
 Every part must share every setting. Each row must be an episode of its part's requested range
-(the rows file's header, planner_episodes.claim_range) played on the object and from the seed
+(the rows file's header, episode_rows.claim_range) played on the object and from the seed
 that evaluate gives episode k (objects[k mod n], episode_seed(seed, object, k div n)): a row
 copied under another episode number, or edited, is refused, naming the part and the episode.
 No episode may come twice. What the parts were asked for and did not play is said, and the
@@ -17,8 +18,8 @@ from pathlib import Path
 
 from corn_drake.errors import InputError
 from corn_drake.evaluation.episodes import episode_seed
-from corn_drake.evaluation.planner_episodes import (labels_path_of, read_labels_by_episode,
-                                                    read_rows, report_of, settings_of)
+from corn_drake.evaluation.episode_rows import read_rows, rows_path_of, settings_of
+from corn_drake.evaluation.planner_episodes import labels_path_of, read_labels_by_episode
 from corn_drake.storage.atomic_files import write_json, write_text
 
 
@@ -63,8 +64,6 @@ def merge_reports(parts: list[Path], out: Path, notes: list | None = None) -> di
     """One report of the episodes the parts (their REPORT.rows.jsonl files) played, written to
     `out` (and its own rows and labels files) atomically; returns the report. `notes` gets what
     a reader should know (episodes missing, a cut line)."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
-
     notes = [] if notes is None else notes
     settings = settings_of(parts[0])
     rows, seen, requested = [], {}, set()
@@ -90,15 +89,11 @@ def merge_reports(parts: list[Path], out: Path, notes: list | None = None) -> di
     labels = {}  # the parts' labels join too (parts written before labels existed have none)
     for part in parts:
         labels.update(read_labels_by_episode(labels_path_of(part), settings))
-    facts = {k: v for k, v in settings.items() if k not in ("task", "seed", "objects")}
-    report = report_of(rows, load_primitive_env_config(settings["task"]).task,
-                       sorted(requested), facts)
-    report.update({"run": "planner", "policy": "planner", "seed": settings["seed"],
-                   "parts": [str(p) for p in parts]})
+    report = _report(settings, rows, sorted(requested))
+    report["parts"] = [str(p) for p in parts]
     first, stop = (min(requested), max(requested) + 1) if requested else (0, 0)
     header = {"settings": settings, "requested": [first, stop]}
-    write_text(out.with_name(out.stem + ".rows.jsonl"),
-               "".join(f"{json.dumps(r)}\n" for r in [header, *rows]))
+    write_text(rows_path_of(out), "".join(f"{json.dumps(r)}\n" for r in [header, *rows]))
     if labels:
         from corn_drake.rl.planner.labels import LABELS_SUFFIX, plain_path_of
         from corn_drake.rl.planner.search import LABEL_COLUMNS
@@ -111,4 +106,25 @@ def merge_reports(parts: list[Path], out: Path, notes: list | None = None) -> di
         # An earlier merge's plain labels here are this merge's own older output.
         plain_path_of(labels_out).unlink(missing_ok=True)
     write_json(out, report)
+    return report
+
+
+def _report(settings: dict, rows: list[dict], requested: list[int]) -> dict:
+    """The report of merged `rows` as the evaluation its settings name writes it: a policy's
+    (settings "runner": "diagram", episodes.policy_report) or the 6D expert's (rows files of
+    the expert name no runner: planner_episodes.report_of)."""
+    if settings.get("runner") == "diagram":
+        from corn_drake.evaluation.episodes import policy_report
+
+        report = policy_report(rows, requested, settings)
+        # What evaluate records of the run beside the episodes (its weights, overrides, ...).
+        report.update({k: v for k, v in settings.items()
+                       if k not in ("runner", "objects", "task", "action_step", "perception")})
+        return report
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
+    from corn_drake.evaluation.planner_episodes import report_of
+
+    facts = {k: v for k, v in settings.items() if k not in ("task", "seed", "objects")}
+    report = report_of(rows, load_primitive_env_config(settings["task"]).task, requested, facts)
+    report.update({"run": "planner", "policy": "planner", "seed": settings["seed"]})
     return report

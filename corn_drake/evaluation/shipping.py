@@ -411,6 +411,6 @@ def _pack_student(loaded, out: Path, library: str) -> dict:
 def _pretraining_record(encoder: str):
     """The contact-pretraining record of the encoder file a student started from (None when that
     file is not on this machine: the student's weights do not carry it)."""
-    from corn_drake.nn.encoder_files import load_frozen_encoder
+    from corn_drake.nn.encoders.encoder_files import load_frozen_encoder
 
     return load_frozen_encoder(encoder).pretraining if encoder and Path(encoder).is_file() else None

@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from corn_drake.nn.patchify import gather_points
+from corn_drake.nn.encoders.patchify import gather_points
 
 HAND_TOKEN = 0  # CORNEncoder's token order: the hand token first, then the patches
 

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from corn_drake.nn.geometry import matrix_from_rot6d
-from corn_drake.nn.patchify import gather_points, patch_indices
+from corn_drake.nn.encoders.patchify import gather_points, patch_indices
 
 POSITION_SCALE = 10.0  # metres -> decimetres
 # Where the goal sits in the features (location_features' layout): the rest does not depend on it.

@@ -37,8 +37,8 @@ from torch import nn
 from corn_drake.config.choices import STUDENT_PARAMETER_GROUPS, STUDENT_PRETRAINED_GROUPS
 from corn_drake.contract import (ACTION_DIM, CONTEXT_KEYS, POSITION_DIM, STUDENT_OBS_KEYS,
                                  observation_size)
-from corn_drake.nn.corn_encoder import CORNEncoder
-from corn_drake.nn.encoder_files import NormalizedEncoder, make_policy_encoder
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.encoder_files import NormalizedEncoder, make_policy_encoder
 from corn_drake.nn.policy import mlp
 
 # The cloud becomes patch tokens and the hand state the pretrained hand token; every other

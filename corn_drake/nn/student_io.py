@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_files import load_frozen_encoder
+from corn_drake.nn.encoders.encoder_files import load_frozen_encoder
 from corn_drake.nn.student import PARAMETER_GROUPS, StudentPolicy
 
 

@@ -31,8 +31,8 @@ import copy
 import torch
 from torch import nn
 
-from corn_drake.nn.corn_encoder import CORNEncoder
-from corn_drake.nn.patchify import patch_indices
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.patchify import patch_indices
 
 # Parts of the encoder the teacher shares with the student (input embeddings); the rest (the
 # transformer layers and the final norm) is the moving average.

@@ -21,7 +21,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from corn_drake.nn.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
 from corn_drake.nn.geometry import matrix_from_rot6d
 from corn_drake.nn.policy import mlp
 

@@ -18,17 +18,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from corn_drake.config.bounds import check_bounds
+from corn_drake.config.plumbing.bounds import check_bounds
 from corn_drake.config.pretraining import PretrainConfig
 from corn_drake.contact.shards import load_split
 from corn_drake.storage.atomic_files import atomic_path
-from corn_drake.nn.corn_encoder import CORNContactModel
+from corn_drake.nn.encoders.corn_encoder import CORNContactModel
 from corn_drake.contract import DEFAULT_NUM_POINTS, HAND_STATE_DIM, POSE7_POSITION, POSE7_QUATERNION
 from corn_drake.nn.geometry import quat_wxyz_to_matrix, rot6d, yaw_matrix
-from corn_drake.nn.input_normalization import InputNormalization
-from corn_drake.nn.metrics import binary_metrics
-from corn_drake.nn.patchify import gather_points, patch_indices
-from corn_drake.nn.pointnet import PointNetContactModel
+from corn_drake.nn.encoders.input_normalization import InputNormalization
+from corn_drake.nn.encoders.metrics import binary_metrics
+from corn_drake.nn.encoders.patchify import gather_points, patch_indices
+from corn_drake.nn.encoders.pointnet import PointNetContactModel
 from corn_drake.pretraining.loop import PretrainLoop
 
 

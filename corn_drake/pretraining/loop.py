@@ -27,8 +27,8 @@ from torch import nn
 from corn_drake.errors import InputError, network_mismatch
 from corn_drake.storage.checkpoint_files import load_checkpoint, save_checkpoint
 from corn_drake.storage.atomic_files import write_json
-from corn_drake.nn.encoder_files import NormalizedEncoder, save_encoder
-from corn_drake.nn.input_normalization import InputNormalization
+from corn_drake.nn.encoders.encoder_files import NormalizedEncoder, save_encoder
+from corn_drake.nn.encoders.input_normalization import InputNormalization
 
 
 def global_rng_state() -> dict:

@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from corn_drake.config.pretraining import PretextConfig
-from corn_drake.nn.corn_encoder import CORNEncoder
+from corn_drake.nn.encoders.corn_encoder import CORNEncoder
 from corn_drake.nn.geometry import random_rotations, rotation_angle
 from corn_drake.pretext.clouds import SPLITS, LibraryClouds
 from corn_drake.pretext.p2v import P2VLiteModel, ema_decay, random_patch_mask

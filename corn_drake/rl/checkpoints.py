@@ -72,7 +72,7 @@ def load_student_run_with_step(run_dir: str | Path):
     """load_student_run's (config, student) and the env steps its checkpoint was distilled for;
     the student's `checkpoint_file` is the file the weights came from (prev.pt after a
     fallback), as a teacher's is, so a report can say which weights it measured."""
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.config.training import DistillConfig
     from corn_drake.errors import InputError
     from corn_drake.nn.student import StudentPolicy

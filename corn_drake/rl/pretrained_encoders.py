@@ -11,7 +11,8 @@ import math
 from pathlib import Path
 
 from corn_drake.errors import InputError
-from corn_drake.nn.encoder_files import NormalizedEncoder, load_frozen_encoder, make_policy_encoder
+from corn_drake.nn.encoders.encoder_files import (NormalizedEncoder, load_frozen_encoder,
+                                                  make_policy_encoder)
 from corn_drake.rl.policy_kinds import ENCODER_KIND
 
 # A frozen encoder must have learned its pretext task before a policy is trained on it: a

@@ -4,9 +4,9 @@ evaluate, ship and plot it; and which command (train or distill) wrote it.
 
 from pathlib import Path
 
-from corn_drake.config.loader import load_config
+from corn_drake.config.plumbing.loader import load_config
 from corn_drake.config.training import DistillConfig, TrainConfig
-from corn_drake.config.yaml_io import field_types, read_tagged_yaml
+from corn_drake.config.plumbing.yaml_io import field_types, read_tagged_yaml
 from corn_drake.errors import InputError, MissingInputError
 
 

@@ -209,7 +209,7 @@ def refuse_changed_config(folder: str | os.PathLike, recorded_path: str | os.Pat
                           **options) -> None:
     """Compares a dataclass config with the one a run recorded (its config.yaml), field by field
     (options as for `changed_arguments`, keys 'a.b.c'); nothing to compare for a new run."""
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
 
     recorded_path = Path(recorded_path)
     if not recorded_path.is_file():
@@ -227,6 +227,6 @@ def refuse_config_changes(folder: str | os.PathLike, recorded: Any, requested: A
     """InputError listing every field of `requested` that differs from the `recorded` config of
     `folder` (options as for `changed_arguments`, keys 'a.b.c'). Both go through the YAML dump
     config.yaml is written with, so only real differences count, not float formatting."""
-    from corn_drake.config.yaml_io import config_fields
+    from corn_drake.config.plumbing.yaml_io import config_fields
 
     refuse_changed_arguments(folder, config_fields(recorded), config_fields(requested), **options)

@@ -19,9 +19,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-from corn_drake.config.loader import load_config
-from corn_drake.config.overrides import config_changes, set_fields
-from corn_drake.config.yaml_io import config_fields
+from corn_drake.config.plumbing.loader import load_config
+from corn_drake.config.plumbing.overrides import config_changes, set_fields
+from corn_drake.config.plumbing.yaml_io import config_fields
 from corn_drake.errors import InputError
 from corn_drake.run_folders.config_file import run_config_path, write_run_config
 from corn_drake.run_folders.guards import LOCK_NAME, lock_folder, refuse_config_changes

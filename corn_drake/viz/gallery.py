@@ -56,7 +56,7 @@ class StillCamera:
         from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
         from corn_drake.scene.builder import build_scene
-        from corn_drake.systems.cameras import add_renderer, look_at
+        from corn_drake.systems.perception.cameras import add_renderer, look_at
 
         builder = DiagramBuilder()
         self.scene = build_scene(builder, scene_cfg, spec)

@@ -34,8 +34,8 @@ from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 
 from corn_drake.contract import POSITION_DIM
-from corn_drake.systems.primitive_executor import (PRIMITIVE_DIM, PRIMITIVE_POINT, STATUS_DIM,
-                                                   STATUS_LAYOUT)
+from corn_drake.systems.control.primitive_executor import (PRIMITIVE_DIM, PRIMITIVE_POINT,
+                                                           STATUS_DIM, STATUS_LAYOUT)
 from corn_drake.timing import PolicyClock
 from corn_drake.viz.attention_view import viridis_rgb
 
@@ -59,7 +59,7 @@ def nearest_locations(cloud: np.ndarray, num_locations: int) -> np.ndarray:
     the policy's features pick them (nn/patchify: deterministic, from point 0)."""
     import torch
 
-    from corn_drake.nn.patchify import farthest_point_sample
+    from corn_drake.nn.encoders.patchify import farthest_point_sample
 
     cloud = np.asarray(cloud, np.float32).reshape(-1, POSITION_DIM)
     if not 1 <= num_locations < len(cloud):
@@ -83,7 +83,7 @@ class PrimitiveView(LeafSystem):
     def __init__(self, meshcat: Meshcat, clock: PolicyClock, num_points: int,
                  num_locations: int | None = None, path: str = DEFAULT_PATH):
         super().__init__()
-        from corn_drake.systems.primitive_policy import CHOICE_DIM
+        from corn_drake.systems.policies.primitive_policy import CHOICE_DIM
 
         self._meshcat, self._clock, self._path = meshcat, clock, path
         self._num_points = num_points

@@ -30,17 +30,17 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from corn_drake.config.bounds import check_bounds
-from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.config.plumbing.bounds import check_bounds
+from corn_drake.config.plumbing.diagram_files import load_teacher_config
 from corn_drake.config.primitive import PrimitiveConfig, at_rest
 from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import POSITION_DIM
 from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import DiagramEnv, TeacherObservationReader, zeros_like_space
 from corn_drake.scene.objects import ObjectSpec
-from corn_drake.systems.low_push import push_contact
-from corn_drake.systems.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM, STATUS_LAYOUT,
-                                                   make_primitive)
+from corn_drake.systems.control.low_push import push_contact
+from corn_drake.systems.control.primitive_executor import (IDLE, PRIMITIVE_DIM, STATUS_DIM,
+                                                           STATUS_LAYOUT, make_primitive)
 
 PRIMITIVE_OBS_KEYS = ("normals", "object_position", "executor", "object_speed")
 

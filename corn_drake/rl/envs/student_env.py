@@ -28,12 +28,12 @@ import numpy as np
 from corn_drake.config.student import SEGMENTATION_MODES, StudentDiagramConfig
 from corn_drake.contract import STUDENT_OBS_KEYS, student_observation_shapes
 from corn_drake.builders.student import StudentDiagram, build_student_diagram
-from corn_drake.config.diagram_files import load_student_config
+from corn_drake.config.plumbing.diagram_files import load_student_config
 from corn_drake.errors import InputError
 from corn_drake.rl.envs.teacher_env import DiagramEnv, TeacherObservationReader
 from corn_drake.scene.objects import ObjectSpec
-from corn_drake.systems.pose_tracker import STATUS_FIELDS as TRACKER_STATUS_FIELDS
-from corn_drake.systems.pose_tracker import pose7_to_matrix, pose_error
+from corn_drake.systems.perception.pose_tracker import STATUS_FIELDS as TRACKER_STATUS_FIELDS
+from corn_drake.systems.perception.pose_tracker import pose7_to_matrix, pose_error
 
 
 class StudentObservationReader:

@@ -24,7 +24,7 @@ from corn_drake.config.teacher import TeacherDiagramConfig
 from corn_drake.contract import ACTION_DIM, OBS_KEYS, check_action
 from corn_drake.errors import InputError
 from corn_drake.builders.teacher import TeacherDiagram, build_teacher_diagram
-from corn_drake.config.diagram_files import load_teacher_config
+from corn_drake.config.plumbing.diagram_files import load_teacher_config
 from corn_drake.scene.objects import ObjectSpec
 from corn_drake.systems.reward import STATUS_FIELDS
 from corn_drake.tasks.episode import Episode, sample_episode

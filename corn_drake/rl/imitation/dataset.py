@@ -141,7 +141,7 @@ def state_arrays(path: Path, library: Path, progress: bool = False) -> dict:
 def _replay_context(path: Path, settings: dict) -> dict:
     """What rebuilding a labels file's states needs: its env config, executor settings, the
     proposing run's agent and its outcome model (whose predicted reward is a feature)."""
-    from corn_drake.config.diagram_files import load_primitive_env_config
+    from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
     from corn_drake.config.primitive import PrimitiveConfig
     from corn_drake.rl.planner.sources import load_policy
 

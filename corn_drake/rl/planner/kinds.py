@@ -1,12 +1,12 @@
 """The planner's primitive kinds: where to touch the object and which way to move, per kind,
 from the object's privileged state (its cloud and normals in the world, its pose, the goal).
 
-Every kind is one primitive of the same executor (systems/primitive_executor.py: up over the
+Every kind is one primitive of the same executor (systems/control/primitive_executor.py: up over the
 object, down to the pre-contact point, a straight push, up again), so the hand only ever moves
 through the controller; what a kind chooses is the contact and the motion:
 
   push    through the centre: a side point whose normal faces away from the goal, pushed
-          toward the goal (lowered to push_height like every shipped push, systems/low_push.py:
+          toward the goal (lowered to push_height like every shipped push, systems/control/low_push.py:
           low, it slides the object instead of tipping it);
   turn    an offset push for yaw: a side point far from the centre whose inward push has the
           largest lever about the vertical through the centre, in the sense that closes the

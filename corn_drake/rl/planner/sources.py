@@ -27,7 +27,7 @@ import numpy as np
 from corn_drake.errors import InputError
 from corn_drake.rl.envs.branching import Candidate
 from corn_drake.rl.planner.kinds import KINDS, Scene
-from corn_drake.systems.primitive_executor import reachable_from_above
+from corn_drake.systems.control.primitive_executor import reachable_from_above
 
 Propose = Callable[[object, dict, np.random.Generator], list[Candidate]]
 

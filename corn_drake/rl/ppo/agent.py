@@ -33,9 +33,9 @@ from corn_drake.config.training import PPOConfig
 from corn_drake.contract import CONTEXT_DIM, CONTEXT_KEYS, POSITION_DIM, STATE_FEATURE_DIM
 from corn_drake.errors import InputError, load_error_detail
 from corn_drake.nn.attention import PatchAttention, nearest_patch, patch_scores
-from corn_drake.nn.encoder_files import NormalizedEncoder
-from corn_drake.nn.input_normalization import InputNormalization
-from corn_drake.nn.patchify import patch_indices
+from corn_drake.nn.encoders.encoder_files import NormalizedEncoder
+from corn_drake.nn.encoders.input_normalization import InputNormalization
+from corn_drake.nn.encoders.patchify import patch_indices
 from corn_drake.nn.policy import CrossAttentionActorCritic, MLPActorCritic, gaussian_action
 from corn_drake.rl.policy_kinds import FROZEN_ENCODER_POLICIES, POLICY_KINDS, TOKEN_POLICIES
 from corn_drake.rl.normalization import RunningMeanStd

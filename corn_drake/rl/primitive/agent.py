@@ -80,8 +80,8 @@ class PrimitiveAgent(nn.Module):
         return features, candidates
 
     def _reachable(self, batch: dict[str, torch.Tensor], candidates: torch.Tensor) -> torch.Tensor:
-        from corn_drake.nn.patchify import gather_points
-        from corn_drake.systems.primitive_executor import reachable_from_above
+        from corn_drake.nn.encoders.patchify import gather_points
+        from corn_drake.systems.control.primitive_executor import reachable_from_above
 
         z = gather_points(batch["cloud"], candidates)[..., 2]
         nz = gather_points(batch["normals"], candidates)[..., 2]  # unit normals
@@ -155,7 +155,7 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
     outcome_model.pt too (the agent then chooses by it, for the config's task)."""
     from pathlib import Path
 
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.config.choices import PRIMITIVE_CHOOSERS
     from corn_drake.errors import InputError, MissingInputError
@@ -198,7 +198,8 @@ def load_primitive_run(run_dir, checkpoint: str = ""):
         # The learned 6D chooser (rl/imitation/): its value network picks among the candidates
         # the outcome model's choices propose.
         from corn_drake.rl.primitive.value_chooser.chooser import ValueChooser
-        from corn_drake.rl.primitive.value_chooser.value_model import MODEL_FILE as VALUE_FILE, load_value_model
+        from corn_drake.rl.primitive.value_chooser.value_model import (MODEL_FILE as VALUE_FILE,
+                                                                       load_value_model)
 
         model, facts = load_value_model(run_dir / VALUE_FILE)
         agent.outcome_chooser = ValueChooser(model, facts, agent.outcome_chooser)

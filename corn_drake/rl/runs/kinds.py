@@ -35,8 +35,8 @@ class TeacherRun(LoadedRun):
         return cls(run, cfg, agent, cfg.policy, steps, agent.checkpoint_file, Path(run))
 
     def configure(self, task, sets):
-        from corn_drake.config.diagram_files import replace_task
-        from corn_drake.config.overrides import apply_sets, config_changes
+        from corn_drake.config.plumbing.diagram_files import replace_task
+        from corn_drake.config.plumbing.overrides import apply_sets, config_changes
 
         run_cfg = replace_task(self.config, task) if task is not None else self.config
         run_cfg = apply_sets(run_cfg, sets, only="env")
@@ -60,8 +60,8 @@ class StudentRun(LoadedRun):
     def configure(self, task, sets):
         """A student takes `--task` and `--set` in its student diagram's teacher part, as a
         teacher's env does."""
-        from corn_drake.config.diagram_files import replace_task
-        from corn_drake.config.overrides import apply_sets, config_changes
+        from corn_drake.config.plumbing.diagram_files import replace_task
+        from corn_drake.config.plumbing.overrides import apply_sets, config_changes
         from corn_drake.config.training import TrainConfig
 
         base = TrainConfig(env=self.config.env.teacher)
@@ -108,8 +108,8 @@ class PrimitiveRun(LoadedRun):
     def configure(self, task, sets):
         """The executor's and outcome settings are the policy's own, so `--set` reaches them
         too (e.g. primitive.success_at_rest=true), and the agent is re-aimed at the result."""
-        from corn_drake.config.diagram_files import primitive_run_on
-        from corn_drake.config.overrides import config_changes
+        from corn_drake.config.plumbing.diagram_files import primitive_run_on
+        from corn_drake.config.plumbing.overrides import config_changes
 
         run_cfg = primitive_run_on(self.config, task, sets)
         self.agent.primitive_config = run_cfg.primitive
@@ -145,8 +145,8 @@ class ReferenceRun(LoadedRun):
     def configure(self, task, sets):
         """A reference has no run: --task chooses its task (default the paper's 6D task), --set
         changes that task; its controller is made for the result."""
-        from corn_drake.config.diagram_files import load_teacher_config
-        from corn_drake.config.overrides import apply_sets, config_changes
+        from corn_drake.config.plumbing.diagram_files import load_teacher_config
+        from corn_drake.config.plumbing.overrides import apply_sets, config_changes
         from corn_drake.config.training import TrainConfig
         from corn_drake.rl import scripted
 
@@ -164,7 +164,7 @@ class PlannerRun(LoadedRun):
     WHAT = "the 6D expert"
     DETAIL = "a privileged search over simulated primitives; --set planner.*"
     NAMES = ("planner",)
-    FLAGS = frozenset({"workers", "ray_address", "episodes_from"})
+    FLAGS = frozenset({"workers", "ray_address"})
     RECORDS = False  # its search steps the env outside a diagram recording
     RUNNER = "planner"
 
@@ -175,8 +175,8 @@ class PlannerRun(LoadedRun):
     def configure(self, task, sets):
         """env (--task, task.* ...), primitive.* and planner.* through the common path; the
         default task is the paper's 6D task on the primitive policies' env layer."""
-        from corn_drake.config.diagram_files import load_primitive_env_config
-        from corn_drake.config.overrides import apply_sets, config_changes
+        from corn_drake.config.plumbing.diagram_files import load_primitive_env_config
+        from corn_drake.config.plumbing.overrides import apply_sets, config_changes
         from corn_drake.config.planner import PlannerRunConfig
         from corn_drake.rl.planner.search import PlannerPolicy
 

@@ -16,8 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from corn_drake.rl.checkpoints import CHOOSER_FILES, weights_hash  # noqa: F401 (read from here too)
-
 
 @dataclass
 class LoadedRun:
@@ -81,6 +79,10 @@ class LoadedRun:
         report it quotes recorded."""
         if self.PACK is None:
             return None
+        # Imported here: the registry of kinds is read while the CLI's parser is built, which
+        # must not import Drake (tests/test_cli_startup.py).
+        from corn_drake.rl.checkpoints import weights_hash
+
         return weights_hash(Path(self.run), self.checkpoint_path)
 
     def report_fields(self) -> dict:

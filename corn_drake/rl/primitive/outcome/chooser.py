@@ -91,7 +91,7 @@ def candidates_of(agent, obs: dict, features: dict, rows: list) -> Candidates:
     executor aim (low_push.push_contact, relative to the object's origin) and normal, the
     object's box keypoints, physics and goal, and the location's token (`features`:
     agent.features(obs)'s)."""
-    from corn_drake.systems.low_push import push_contact
+    from corn_drake.systems.control.low_push import push_contact
 
     p = np.asarray(obs["object_position"], np.float64)
     keypoints = np.asarray(obs["object_keypoints"], np.float64).reshape(-1, 3) - p

@@ -30,7 +30,7 @@ import numpy as np
 
 from corn_drake.errors import InputError
 from corn_drake.rl.primitive.outcome.lookahead import candidate_primitives, lookahead_step
-from corn_drake.systems.low_push import push_contact
+from corn_drake.systems.control.low_push import push_contact
 
 FEATURE_KEYS = ("tokens", "local", "global", "mask")
 COLLECT_SEED = 5000  # episode k's seed is COLLECT_SEED + k: apart from evaluate's (1000...)
@@ -110,23 +110,38 @@ def chunk_path(out: Path, first: int) -> Path:
     return Path(out) / f"episodes_{first:05d}.npz"
 
 
-def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int = 10,
-                   random_motions: int = 2, follow_policy: float = 0.5, at_rest: bool = False,
-                   settle_steps: int = 0, sets=(), log=print) -> list[Path]:
-    """Episodes start .. start + episodes - 1 of primitive run `run`'s lookahead on library
-    `objects`' training objects, written `chunk` episodes to a file under `out` (module
-    docstring); returns the files written (those already there are skipped). `at_rest`: the
-    env's success needs the object still at the end of a primitive
-    (PrimitiveConfig.success_at_rest); `settle_steps`: periods the executor waits for the object
-    to settle after each primitive; `sets`: env.* / primitive.* overrides as `evaluate --set`
-    takes them. `log` gets one JSON line per episode. Bad inputs: InputError, nothing written."""
-    import json
+@dataclasses.dataclass
+class Collection:
+    """What every chunk of one collection is made with, checked and recorded once
+    (prepare_collection): the proposing run's agent, the collecting env's settings, the
+    library's training objects, and the chunks [first, last) still to write into `out`."""
+    agent: object
+    env: object  # the run's env config (its seed is COLLECT_SEED's for every object's env)
+    primitive: object  # PrimitiveConfig with at_rest / settle_steps applied
+    objects: Path
+    ids: list[str]
+    out: Path
+    chunks: list[tuple[int, int]]
+    random_motions: int
+    follow_policy: float
 
-    from corn_drake.assets.library import list_objects, load_object_spec
-    from corn_drake.config.diagram_files import primitive_run_on
-    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+
+def prepare_collection(run, objects, episodes: int, out, start: int = 0, chunk: int = 10,
+                       random_motions: int = 2, follow_policy: float = 0.5,
+                       at_rest: bool = False, settle_steps: int = 0, sets=()) -> Collection:
+    """The Collection of episodes start .. start + episodes - 1 of primitive run `run`'s
+    lookahead on library `objects`' training objects, `chunk` episodes to a file under `out`
+    (module docstring), the chunks already there left out. `at_rest`: the env's success needs
+    the object still at the end of a primitive (PrimitiveConfig.success_at_rest);
+    `settle_steps`: periods the executor waits for the object to settle after each primitive;
+    `sets`: env.* / primitive.* overrides as `evaluate --set` takes them. Bad inputs:
+    InputError, nothing written."""
+    from corn_drake.assets.content_hash import library_content_hash
+    from corn_drake.assets.library import list_objects
+    from corn_drake.config.plumbing.diagram_files import primitive_run_on
+    from corn_drake.rl.checkpoints import agent_weights_folder, weights_hash
     from corn_drake.rl.primitive.agent import load_primitive_run
-    from corn_drake.storage.atomic_files import atomic_path
+    from corn_drake.run_folders.inputs_record import check_inputs
 
     if episodes < 1 or chunk < 1 or start < 0 or random_motions < 0:
         raise InputError(f"episodes {episodes} and chunk {chunk} must be >= 1, start {start} "
@@ -142,12 +157,7 @@ def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int 
                                     settle_steps=settle_steps)
     out = Path(out)
     # What the folder's files are made of: another run, library or setting added to it later
-    # would mix data (processes with other --start values share these).
-    from corn_drake.assets.content_hash import library_content_hash
-    from corn_drake.rl.checkpoints import agent_weights_folder
-    from corn_drake.rl.checkpoints import weights_hash
-    from corn_drake.run_folders.inputs_record import check_inputs
-
+    # would mix data (processes with other --start values, or workers, share these).
     checkpoint = agent_weights_folder(Path(run), base.agent_weights) / "checkpoints" / \
         agent.checkpoint_file
     check_inputs(out, {"run_weights": weights_hash(Path(run), checkpoint),
@@ -155,26 +165,68 @@ def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int 
                        "random_motions": random_motions, "follow_policy": follow_policy,
                        "at_rest": at_rest, "settle_steps": settle_steps, "sets": list(sets)},
                  "outcome data")
-    envs, written, end = {}, [], start + episodes
-    for first in range(start, end, chunk):
-        path = chunk_path(out, first)
-        if path.exists():  # an earlier run's chunk, whole (written atomically)
-            continue
-        states, episode_of, object_of = [], [], []
-        for k in range(first, min(first + chunk, end)):
-            object_id = ids[k % len(ids)]
-            if object_id not in envs:  # one env per object, reset with each episode's seed
-                envs[object_id] = PrimitiveEnv(dataclasses.replace(cfg.env, seed=COLLECT_SEED),
-                                               primitive, load_object_spec(objects, object_id))
-            rng = np.random.default_rng(COLLECT_SEED + k)
-            found, outcome = collect_episode(envs[object_id], agent, COLLECT_SEED + k,
-                                             random_motions, follow_policy, rng)
-            states += found
-            episode_of += [k] * len(found)
-            object_of += [object_id] * len(found)
-            log(json.dumps({"episode": k, "object": object_id, **outcome}))
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, **stack_states(states), episode=np.array(episode_of, np.int64),
-                     object=np.array(object_of))
-        written.append(path)
+    end = start + episodes
+    # A chunk already there is an earlier run's, whole (written atomically): kept.
+    chunks = [(first, min(first + chunk, end)) for first in range(start, end, chunk)
+              if not chunk_path(out, first).exists()]
+    return Collection(agent, dataclasses.replace(cfg.env, seed=COLLECT_SEED), primitive,
+                      Path(objects), ids, out, chunks, random_motions, follow_policy)
+
+
+def collect_chunk(collection: Collection, first: int, last: int, envs: dict,
+                  objects=None) -> tuple[dict[str, np.ndarray], list[dict]]:
+    """(the arrays of chunk file `first`, one outcome row per episode) for episodes first ..
+    last - 1. `envs` keeps one env per object across calls (each reset with its episode's
+    seed); `objects`: the library's folder as this process reads it (a Ray worker's node copy;
+    default the collection's). Episode k's data depends on k only, whichever process plays it."""
+    from corn_drake.assets.library import load_object_spec
+    from corn_drake.rl.envs.primitive_env import PrimitiveEnv
+
+    objects = Path(objects) if objects is not None else collection.objects
+    states, episode_of, object_of, rows = [], [], [], []
+    for k in range(first, last):
+        object_id = collection.ids[k % len(collection.ids)]
+        if object_id not in envs:  # one env per object, reset with each episode's seed
+            envs[object_id] = PrimitiveEnv(collection.env, collection.primitive,
+                                           load_object_spec(objects, object_id))
+        rng = np.random.default_rng(COLLECT_SEED + k)
+        found, outcome = collect_episode(envs[object_id], collection.agent, COLLECT_SEED + k,
+                                         collection.random_motions, collection.follow_policy,
+                                         rng)
+        states += found
+        episode_of += [k] * len(found)
+        object_of += [object_id] * len(found)
+        rows.append({"episode": k, "object": object_id, **outcome})
+    arrays = {**stack_states(states), "episode": np.array(episode_of, np.int64),
+              "object": np.array(object_of)}
+    return arrays, rows
+
+
+def write_chunk(out, first: int, arrays: dict[str, np.ndarray]) -> Path:
+    """Chunk file `first` under `out`, atomically (a stopped write leaves no part file)."""
+    from corn_drake.storage.atomic_files import atomic_path
+
+    path = chunk_path(out, first)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    return path
+
+
+def collect_chunks(run, objects, episodes: int, out, start: int = 0, chunk: int = 10,
+                   random_motions: int = 2, follow_policy: float = 0.5, at_rest: bool = False,
+                   settle_steps: int = 0, sets=(), log=print) -> list[Path]:
+    """prepare_collection's chunks collected in this process and written (module docstring);
+    returns the files written (those already there are skipped). `log` gets one JSON line per
+    episode. (`collect-outcomes --workers N` plays the same chunks on Ray workers instead:
+    rl/workers/outcome_workers.py.)"""
+    import json
+
+    collection = prepare_collection(run, objects, episodes, out, start, chunk, random_motions,
+                                    follow_policy, at_rest, settle_steps, sets)
+    envs, written = {}, []
+    for first, last in collection.chunks:
+        arrays, rows = collect_chunk(collection, first, last, envs)
+        for row in rows:
+            log(json.dumps(row))
+        written.append(write_chunk(collection.out, first, arrays))
     return written

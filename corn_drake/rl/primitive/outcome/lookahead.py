@@ -5,8 +5,8 @@ A diagnostic, not a policy: it uses the simulator (the exact object, its mass an
 a model, which no deployed policy has. What it measures is how far the primitive set itself
 can take a task when each primitive is chosen as well as one primitive's outcome allows: if
 that is far above the learned policy, the learner is what holds the task back; if it is not,
-the primitives are (the primitive results, item 33;
-experiments/primitive_outcomes/lookahead_oracle.py runs it on the evaluation episodes). It also
+the primitives are (the primitive results, item 33; `evaluate --run planner --set
+planner.depth=1` runs it on the evaluation episodes: rl/planner/). It also
 labels the data an outcome model is fitted to (collect.py: every candidate's measured outcome).
 
 The candidates are the learned policy's own: for every location it may use, the motion its

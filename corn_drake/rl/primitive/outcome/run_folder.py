@@ -18,7 +18,7 @@ from corn_drake.rl.primitive.outcome.model import MODEL_FILE
 def outcome_run_config(run: Path, task: str | None, sets: list[str]):
     """The proposing run's config with chooser outcome_model, its encoder named as this folder
     reads it, `task`'s overlay and `sets` applied as `corn-drake evaluate` applies them."""
-    from corn_drake.config.diagram_files import primitive_run_on
+    from corn_drake.config.plumbing.diagram_files import primitive_run_on
     from corn_drake.rl.checkpoints import run_encoder_path
     from corn_drake.rl.primitive.agent import load_primitive_run
 
@@ -40,7 +40,7 @@ def write_outcome_run(run: Path, cfg, model, tokens: bool, facts: dict, out: Pat
     import shutil
     import tempfile
 
-    from corn_drake.config.loader import load_config
+    from corn_drake.config.plumbing.loader import load_config
     from corn_drake.config.primitive import PrimitiveTrainConfig
     from corn_drake.errors import MissingInputError
     from corn_drake.rl.checkpoints import agent_weights_folder

@@ -1,0 +1,1 @@
+"""One mesh -> one library object: decomposition, Drake-loadable hulls, stable poses."""

@@ -1,0 +1,1 @@
+"""The perception benchmarks: frames/s of the camera chain and ICP tracking error."""
