@@ -61,9 +61,12 @@ def test_train_then_evaluate_writes_the_report_keys(tmp_path):
     assert data["env_steps"] == 64 and data["checkpoint"] == "last.pt"
     html = data["episodes"][0]["recording"]
     assert html and Path(html).stat().st_size > 10_000
-    # A kept snapshot evaluates as the run at its step.
-    assert main(["evaluate", "--run", str(run), "--checkpoint", "step_000000032.pt",
-                 "--episodes", "1", "--record", "0", "--report", str(report)]) == 0
+    # A kept snapshot evaluates as the run at its step; into the same report only with
+    # --overwrite (its rows are another evaluation's: the weights differ).
+    snapshot = ["evaluate", "--run", str(run), "--checkpoint", "step_000000032.pt",
+                "--episodes", "1", "--record", "0", "--report", str(report)]
+    assert main(snapshot) == 2
+    assert main([*snapshot, "--overwrite"]) == 0
     data = json.loads(report.read_text())
     assert data["env_steps"] == 32 and data["checkpoint"] == "step_000000032.pt"
 

@@ -297,7 +297,7 @@ ROWS += [
 # A planner evaluation's split parts merged (issue 54).
 ROWS += [
     _row("merge-reports {root}/nosuch.rows.jsonl --report {root}/out/m.json", "nosuch.rows.jsonl"),
-    _row("merge-reports {root}/out/report.json --report {root}/out/m.json", "not a planner rows file"),
+    _row("merge-reports {root}/out/report.json --report {root}/out/m.json", "not an evaluation's rows file"),
     _row("merge-reports {root}/lib/manifest.json", "--report"),
 ]
 ROWS += [_row(f"train --device gpu {OUT}", "--device: device must be cpu, cpu:N, cuda or cuda:N, got 'gpu'")]

@@ -137,7 +137,7 @@ def _distill(teacher, encoder, out, steps, *extra):
 @pytest.mark.slow
 def test_a_killed_distill_run_resumes_at_its_checkpoint_step(teacher_run, tmp_path, monkeypatch,
                                                              capsys):
-    from corn_drake.rl import dagger
+    from corn_drake.rl.training import dagger
 
     teacher, encoder = teacher_run
     out = tmp_path / "student"

@@ -23,7 +23,7 @@ def test_evaluate_prints_where_the_recordings_went_and_shows_progress(tmp_path, 
     assert f"{recordings}/" in out and len(list(recordings.glob("*.html"))) == 1
     assert "episodes: 100%" in err and "2/2" in err  # the bar reached the end
     assert main([*EVALUATE, "--episodes", "1", "--record", "0", "--no-progress",
-                 "--report", str(report)]) == 0
+                 "--report", str(report), "--overwrite"]) == 0  # fewer episodes: afresh
     out, err = capsys.readouterr()
     assert "episodes:" not in err and "recordings" not in out  # none recorded, none named
 

@@ -117,10 +117,10 @@ def test_a_report_records_the_weights_it_measured_and_ship_refuses_others(studen
     assert _ship(run, library, report, out) == 2
     one_error_line(capsys, f"--report {report}", "96", "120", f"--run {run}")
     assert not out.exists() and not out.parent.exists()  # nothing written for a refused run
-    # Evaluated again, the report is of the weights that ship.
+    # Evaluated again (afresh: its weights changed), the report is of the weights that ship.
     assert main(["evaluate", "--run", str(run), "--objects", str(library), "--split", "unseen",
                  "--episodes", "1", "--record", "0", "--no-progress", "--report",
-                 str(report)]) == 0
+                 str(report), "--overwrite"]) == 0
     assert _ship(run, library, report, out) == 0
     card = json.loads((out / "card.json").read_text())
     assert card["env_steps"] == 120 and "complete" not in card

@@ -186,7 +186,7 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
     assert max(steps) == 7 and all(1 <= s <= 7 for s in steps), steps  # 7-step episodes
     # An explicit override is applied, printed and recorded.
     assert main(["evaluate", "--run", str(run), "--episodes", "2", "--record", "0",
-                 "--set", "task.episode_steps=3", "--report", str(report)]) == 0
+                 "--set", "task.episode_steps=3", "--report", str(report), "--overwrite"]) == 0
     assert "env.task.episode_steps 7 -> 3" in capsys.readouterr().out
     data = json.loads(report.read_text())
     assert data["overrides"] == [{"key": "env.task.episode_steps", "old": 7, "new": 3}]
@@ -199,7 +199,7 @@ def test_run_trained_on_a_task_overlay_evaluates_on_that_task(tmp_path, capsys):
     assert (data["task"], data["action_step"]) == ("mytask", 0.03)
     assert [e["steps"] for e in data["episodes"]] == [7]
     assert main(["evaluate", "--run", "still", "--set", "task.episode_steps=2", "--episodes", "1",
-                 "--record", "0", "--report", str(report)]) == 0
+                 "--record", "0", "--report", str(report), "--overwrite"]) == 0
     data = json.loads(report.read_text())
     assert (data["task"], data["action_step"]) == ("full6d", 0.06)
     # `curves` labels the run with its policy and task, from the same config.

@@ -43,6 +43,8 @@ HELP = ("evaluate a policy (a teacher, a contact-primitive policy, a student, a 
 
 
 def add_arguments(parser):
+    from corn_drake.arguments.episode_workers import add_episode_workers
+
     from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 
@@ -60,12 +62,7 @@ def add_arguments(parser):
                         help="which objects of the library the episodes go round-robin over")
     parser.add_argument("--episodes", type=positive_int, default=10,
                         help="episodes in all, round-robin over the objects")
-    parser.add_argument("--workers", type=nonnegative_int, default=0,
-                        help="--run planner only: Ray workers playing episodes side by side "
-                             "(0: in this process)")
-    parser.add_argument("--ray-address", default="",
-                        help="--run planner only: a Ray cluster's address for --workers "
-                             "(default: a Ray of this process's own)")
+    add_episode_workers(parser, "playing episodes", only="--run planner only: ")
     parser.add_argument("--episodes-from", type=nonnegative_int, default=0, metavar="K",
                         help="play episodes K..--episodes-1 only (to spread them over "
                              "processes; merge-reports joins the parts). Every evaluation "
@@ -184,6 +181,7 @@ KIND_FLAGS = {"perception": "--perception", "attention": "--attention",
 def _refuse_flags(args, kind) -> None:
     """The flags this kind of run (a LoadedRun subclass) has no use for, refused in one line
     before anything loads, naming the kinds that take them."""
+    from corn_drake.arguments.episode_workers import check_ray_address
     from corn_drake.rl.runs.kinds import kinds_taking
 
     for dest, flag in KIND_FLAGS.items():
@@ -194,8 +192,7 @@ def _refuse_flags(args, kind) -> None:
         takers = " or ".join(k.WHAT for k in kinds_taking(dest))
         hint = f": {kind.HINTS[dest]}" if dest in kind.HINTS else ""
         raise InputError(f"{shown} applies to {takers}; --run {args.run} is {kind.WHAT}{hint}")
-    if args.ray_address and not args.workers:
-        raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
+    check_ray_address(args)
     if args.record and not kind.RECORDS:
         raise InputError(f"--record {args.record}: --run {args.run} ({kind.WHAT}) records no "
                          "Meshcat episodes yet (it steps the env outside a diagram recording); "

@@ -53,9 +53,23 @@ def read_rows(path: Path, settings: dict | None, repair: bool = True,
     if not records or "settings" not in records[0]:
         raise InputError(f"{path}: not an evaluation's rows file (its first line names no settings)")
     if settings is not None and records[0]["settings"] != settings:
-        raise InputError(f"{path} holds another evaluation's rows (other settings); "
-                         "choose another --report (`evaluate --overwrite` starts it afresh)")
+        change = differing(records[0]["settings"], settings)
+        raise InputError(f"{path} holds another evaluation's rows ({change}); choose another "
+                         f"--report{AFRESH}")
     return records[1:]
+
+
+# How a user replaces an evaluation's rows instead of resuming them (evaluate's flag).
+AFRESH = " (`evaluate --overwrite` starts it afresh)"
+
+
+def differing(then: dict, now: dict) -> str:
+    """"KEY: A then, B now" for the first setting that differs (what a refusal names)."""
+    for key in sorted(set(then) | set(now)):
+        if then.get(key) != now.get(key):
+            show = lambda v: json.dumps(v)[:80]  # noqa: E731
+            return f"{key}: {show(then.get(key))} then, {show(now.get(key))} now"
+    return "other settings"
 
 
 def claim_range(rows_path: Path, settings: dict, episodes: range, rows: list[dict]) -> None:
@@ -76,7 +90,8 @@ def claim_range(rows_path: Path, settings: dict, episodes: range, rows: list[dic
         if before or rows:
             raise InputError(f"{rows_path} holds the evaluation of episodes {had.start}.."
                              f"{had.stop - 1}; ask for a range holding it (--episodes-from "
-                             f"{had.start} --episodes {had.stop}) or give another --report")
+                             f"{had.start} --episodes {had.stop}) or give another "
+                             f"--report{AFRESH}")
     if before != header["requested"]:
         write_text(rows_path, "\n".join([json.dumps(header), *lines[1:]]) + "\n")
 

@@ -49,7 +49,8 @@ def play_on_workers(jobs: list[tuple], policy, cfg, labeller_facts, library, wor
                     done):
     """Plays `jobs` [(k, object id, spec or None, seed)] on `workers` Ray workers (Ray started
     by the caller), calling `done(row)` in the driver as each episode ends."""
-    from corn_drake.rl.workers.cluster import check_room, death_reason, worker_cpus
+    from corn_drake.rl.workers.cluster import check_room, worker_cpus
+    from corn_drake.rl.workers.job_pool import run_on_pool
 
     cpus = worker_cpus(workers)
     check_room(workers, cpus, "planner workers")
@@ -59,21 +60,5 @@ def play_on_workers(jobs: list[tuple], policy, cfg, labeller_facts, library, wor
         return PlannerEpisodeWorker.options(**worker_options(cpus)).remote(
             policy, cfg, labeller_facts, packed)
 
-    pool = [spawn() for _ in range(min(workers, len(jobs)))]
-    pending, running = list(jobs), {}
-    while pending or running:
-        for i, worker in enumerate(pool):
-            if pending and all(w is not i for w, _ in running.values()):
-                job = pending.pop(0)
-                running[worker.play.remote(*job)] = (i, job)
-        ready, _ = ray.wait(list(running), num_returns=1)
-        i, job = running.pop(ready[0])
-        try:
-            row = ray.get(ready[0])
-        except (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError) as error:
-            print(f"planner worker {i} died ({death_reason(error)}): episode {job[0]} goes to "
-                  "a new worker", flush=True)
-            pool[i] = spawn()
-            pending.insert(0, job)
-            continue
-        done(row)
+    run_on_pool(spawn, workers, jobs, lambda w, job: w.play.remote(*job),
+                lambda job, row: done(row), "planner", lambda job: f"episode {job[0]}")

@@ -33,6 +33,8 @@ def _probability(text: str) -> float:
 
 
 def add_arguments(parser):
+    from corn_drake.arguments.episode_workers import add_episode_workers
+
     parser.add_argument("run", type=Path, help="the primitive run (or shipped folder) whose "
                                                "policy proposes the candidates")
     parser.add_argument("--objects", default="data/library",
@@ -57,12 +59,7 @@ def add_arguments(parser):
     parser.add_argument("--set", action="append", default=[], dest="set", metavar="KEY=VALUE",
                         help="env.* / primitive.* setting of the collecting env, as evaluate's "
                              "(e.g. primitive.max_primitives=5; default: none, the run's own)")
-    parser.add_argument("--workers", type=nonnegative_int, default=0,
-                        help="Ray workers collecting chunks side by side (0: in this process); "
-                             "the files are the same either way")
-    parser.add_argument("--ray-address", default="",
-                        help="a Ray cluster's address for --workers (default: a Ray of this "
-                             "process's own on this machine's cores)")
+    add_episode_workers(parser, "collecting chunks (the files are the same either way)")
     parser.add_argument("--out", type=Path, required=True, help="the data folder")
 
 
@@ -71,15 +68,14 @@ def run(args) -> int:
 
     import torch
 
-    from corn_drake.errors import InputError
+    from corn_drake.arguments.episode_workers import check_ray_address
     from corn_drake.rl.primitive.outcome.collect import (collect_chunks, prepare_collection,
                                                          write_chunk)
     from corn_drake.rl.runs.kinds import require_kind
 
+    check_ray_address(args)
     # The proposing run through the registry of run kinds: another kind is named as such.
     require_kind(str(args.run), "primitive", flag="RUN", needs="`collect-outcomes`")
-    if args.ray_address and not args.workers:
-        raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
 
     # One thread: collections run as many one-core processes side by side (16 on the lent
     # machine), and the per-state network calls are too small to gain from more.

@@ -29,6 +29,8 @@ HELP = ("label training objects' states with the 6D expert's search (DAgger: the
 
 
 def add_arguments(parser):
+    from corn_drake.arguments.episode_workers import add_episode_workers
+
     parser.add_argument("--objects", type=Path, required=True,
                         help="object library folder (`corn-drake objects --split train`)")
     parser.add_argument("--episodes", type=positive_int, default=10,
@@ -51,11 +53,7 @@ def add_arguments(parser):
                         help="path of the labels without suffix: OUT.labels.jsonl.gz, "
                              "OUT.rows.jsonl and OUT.json are written (e.g. "
                              "models/labels/full6d/round1)")
-    parser.add_argument("--workers", type=nonnegative_int, default=0,
-                        help="Ray workers labelling episodes side by side (0: in this process)")
-    parser.add_argument("--ray-address", default="",
-                        help="a Ray cluster's address for --workers (default: a Ray of this "
-                             "process's own)")
+    add_episode_workers(parser, "labelling episodes")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -74,6 +72,7 @@ def _labeller(args, primitive, task):
 
 
 def run(args) -> int:
+    from corn_drake.arguments.episode_workers import check_ray_address
     from corn_drake.assets.content_hash import library_content_hash
     from corn_drake.assets.library import list_objects, load_object_spec
     from corn_drake.evaluation.planner_episodes import evaluate_planner
@@ -85,8 +84,7 @@ def run(args) -> int:
     if args.episodes_from >= args.episodes:
         raise InputError(f"--episodes-from {args.episodes_from}: no episodes before --episodes "
                          f"{args.episodes}")
-    if args.ray_address and not args.workers:
-        raise InputError("--ray-address needs --workers N (the workers it runs on the cluster)")
+    check_ray_address(args)
     if args.out.suffix in (".json", ".jsonl", ".gz"):
         raise InputError(f"--out {args.out}: give the path without a suffix (OUT.labels.jsonl.gz "
                          "and the others are written beside it)")

@@ -37,7 +37,8 @@ def collect_on_workers(collection, library, workers: int, done) -> None:
     """Collects `collection.chunks` on `workers` Ray workers (Ray started by the caller), the
     objects packed in `library` (cluster.pack_objects); `done(first, arrays, rows)` runs in the
     driver as each chunk ends."""
-    from corn_drake.rl.workers.cluster import check_room, death_reason, worker_cpus
+    from corn_drake.rl.workers.cluster import check_room, worker_cpus
+    from corn_drake.rl.workers.job_pool import run_on_pool
 
     cpus = worker_cpus(workers)
     check_room(workers, cpus, "outcome workers")
@@ -46,23 +47,6 @@ def collect_on_workers(collection, library, workers: int, done) -> None:
     def spawn():
         return OutcomeChunkWorker.options(**worker_options(cpus)).remote(shared, packed)
 
-    pool = [spawn() for _ in range(min(workers, len(collection.chunks)))]
-    pending, running = list(collection.chunks), {}
-    while pending or running:
-        busy = {i for i, _ in running.values()}
-        for i, worker in enumerate(pool):
-            if pending and i not in busy:
-                job = pending.pop(0)
-                running[worker.collect.remote(*job)] = (i, job)
-                busy.add(i)
-        ready, _ = ray.wait(list(running), num_returns=1)
-        i, job = running.pop(ready[0])
-        try:
-            arrays, rows = ray.get(ready[0])
-        except (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError) as error:
-            print(f"outcome worker {i} died ({death_reason(error)}): episodes {job[0]}-"
-                  f"{job[1] - 1} go to a new worker", flush=True)
-            pool[i] = spawn()
-            pending.insert(0, job)
-            continue
-        done(job[0], arrays, rows)
+    run_on_pool(spawn, workers, collection.chunks, lambda w, job: w.collect.remote(*job),
+                lambda job, result: done(job[0], *result), "outcome",
+                lambda job: f"episodes {job[0]}-{job[1] - 1}")
