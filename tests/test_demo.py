@@ -50,7 +50,8 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     # The smallest library with both splits (2 train, 1 unseen: demo refuses fewer) and two
     # evaluation episodes: every stage still runs and writes what it writes at full size.
     argv = ["demo", "--out", str(tmp_path), "--num-objects", "3", "--num-samples", "4000",
-            "--pretrain-steps", "40", "--train-steps", "400", "--eval-episodes", "2"]
+            "--pretrain-steps", "40", "--train-steps", "400", "--eval-episodes", "2",
+            "--encoder", "pretrain"]  # every stage, however busy the machine is
     args = build_parser().parse_args(argv)
     assert main(argv) == 0
 
@@ -112,7 +113,7 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
         pretraining["steps"], pretraining["train_seconds"])
     again = torch.load(run / "checkpoints" / "last.pt", weights_only=False)
     assert again["global_step"] == checkpoint["global_step"]  # no primitive trained again
-    assert main([*argv[:-2], "--eval-episodes", "2", "--num-objects", "4"]) == 2
+    assert main([*argv[:-4], "--eval-episodes", "2", "--num-objects", "4"]) == 2
 
 
 def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
@@ -136,3 +137,38 @@ def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
     # And the seed matters: another seed's untrained agent differs.
     other = weights(untrained_agent(PrimitiveTrainConfig(env=cfg.env, seed=8), encoder))
     assert any(not torch.equal(started[k], other[k]) for k in started)
+
+
+def test_the_budget_takes_the_shipped_encoder_only_where_pretraining_would_not_fit(tmp_path,
+                                                                                  capsys,
+                                                                                  monkeypatch):
+    """`--encoder auto` decides from the probes' times (given here: no timing in a test): a
+    quiet project core pretrains, one running the demo's work 2.5x slower takes the shipped
+    encoder and says so; a rerun keeps the first choice, and an --encoder that contradicts it is
+    refused, naming both."""
+    from argparse import Namespace
+
+    from corn_drake.commands import demo, demo_budget
+    from corn_drake.errors import InputError
+
+    quiet = dict(demo_budget.REFERENCE_PROBE_S)
+    busy = {k: 2.5 * v for k, v in quiet.items()}
+    sizes = dict(demo_budget.DEFAULT_SIZES)
+    assert demo_budget.plan(sizes, "auto", quiet)[0] is False
+    shipped, expected, slowdowns = demo_budget.plan(sizes, "auto", busy)
+    assert shipped and slowdowns == pytest.approx({"torch": 2.5, "python": 2.5})
+    assert sum(expected.values()) > demo_budget.BUDGET_S
+    assert demo_budget.plan(sizes, "pretrain", busy)[0] is False
+    assert demo_budget.plan(sizes, "shipped", quiet)[0] is True
+
+    args = Namespace(encoder="auto", **{f"{k}": v for k, v in (
+        ("num_objects", 14), ("num_samples", 20_000), ("pretrain_steps", 600),
+        ("train_steps", 2400), ("eval_episodes", 20))})
+    monkeypatch.setattr(demo_budget, "pace_probe", lambda: busy)
+    assert demo._budget(args, tmp_path) is True
+    said = capsys.readouterr().out
+    assert "shipped CORN encoder" in said and "would not fit" in said
+    monkeypatch.setattr(demo_budget, "pace_probe", lambda: quiet)
+    assert demo._budget(args, tmp_path) is True  # the first run's choice holds on a rerun
+    with pytest.raises(InputError, match="--encoder pretrain.*shipped"):
+        demo._budget(Namespace(**{**vars(args), "encoder": "pretrain"}), tmp_path)

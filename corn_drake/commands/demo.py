@@ -1,5 +1,9 @@
 """`corn-drake demo`: the pipeline end to end at a size that learns in about 7 minutes on one
-CPU core, ending with a policy measurably better than the one it started from.
+quiet CPU core, ending with a policy measurably better than the one it started from.
+
+It times a short probe first (demo_budget.py) and prints what the stages will take on this
+machine as busy as it is now; where contact data and pretraining would take it past ten
+minutes, it takes the shipped CORN encoder instead (`--encoder auto`, the default) and says so.
 
 1. object library: procedural objects, train and unseen families;
 2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
@@ -53,6 +57,11 @@ def add_arguments(parser):
                         help="contact-pretraining steps of the CORN encoder")
     parser.add_argument("--train-steps", type=positive_int, default=2400,
                         help="primitives of the policy's TD3 training")
+    parser.add_argument("--encoder", choices=("auto", "pretrain", "shipped"), default="auto",
+                        help="the policy's frozen encoder: pretrained here (stages 2-3), the "
+                             "shipped one (models/weights/push_corn/encoder.pt, 6,000 steps), "
+                             "or auto: pretrained here unless that would take the demo past "
+                             "ten minutes on this machine as busy as it is now")
     parser.add_argument("--eval-episodes", type=positive_int, default=20,
                         help="episodes of each evaluation on the unseen objects (the same "
                              "objects and goals for the untrained, trained and shipped policy)")
@@ -106,7 +115,14 @@ def run(args) -> int:
                                "--train-steps": args.train_steps},
                          made_by=NAME, may_grow=("--train-steps",),
                          holds_own=lambda f: (f / "library" / "manifest.json").is_file())
-        return _run(args, out)
+        # torch's thread count as every command's `--torch-threads auto` sets it (nn/threads.py):
+        # one thread on a 2-CPU machine. torch's own 2 threads wait on each other beside any
+        # other busy process: the probe below ran 0.35 s against 0.13 s with one thread beside
+        # one CPU-bound job (0.10 against 0.14 quiet), and a newcomer's pretraining took 29 min.
+        from corn_drake.nn.threads import auto_torch_threads, torch_threads
+
+        with torch_threads(auto_torch_threads()):
+            return _run(args, out)
 
 
 def _run(args, out: Path) -> int:
@@ -119,8 +135,7 @@ def _run(args, out: Path) -> int:
     from corn_drake.storage.atomic_files import write_json
 
     t0 = time.perf_counter()
-    print("[demo] about 7 minutes on one core (more beside other jobs); each stage's bar says "
-          "what it has left", flush=True)
+    shipped_encoder = _budget(args, out)
 
     _stage("1/6 object library", t0)
     process = ProcessConfig()
@@ -128,18 +143,26 @@ def _run(args, out: Path) -> int:
     library = out / "library"
     build_procedural(library, args.num_objects, args.seed, process)
 
-    _stage("2/6 contact data", t0)
-    data = out / "contact_data"
-    generate_dataset(library, data, args.num_samples, args.seed)
+    if shipped_encoder:
+        _stage("2/6 and 3/6 contact data and pretraining: skipped, the shipped CORN encoder "
+               f"({SHIPPED_ENCODER}) instead", t0)
+        encoder_file = shipped_encoder_file()
+        auroc = _shipped_auroc()
+    else:
+        _stage("2/6 contact data", t0)
+        data = out / "contact_data"
+        generate_dataset(library, data, args.num_samples, args.seed)
 
-    _stage("3/6 contact pretraining of the CORN encoder", t0)
-    pre = out / "pretrain" / "corn"
-    pcfg = PretrainConfig(model="corn", steps=args.pretrain_steps, batch_size=256,
-                          warmup_steps=max(args.pretrain_steps // 10, 1),
-                          eval_every=max(args.pretrain_steps // 2, 1),
-                          checkpoint_every=max(args.pretrain_steps // 2, 1), eval_samples=1024)
-    encoder = Pretrainer(pcfg, data, pre).train()  # its metrics.json
-    auroc = encoder.get("unseen_patch_auroc", float("nan"))
+        _stage("3/6 contact pretraining of the CORN encoder", t0)
+        pre = out / "pretrain" / "corn"
+        pcfg = PretrainConfig(model="corn", steps=args.pretrain_steps, batch_size=256,
+                              warmup_steps=max(args.pretrain_steps // 10, 1),
+                              eval_every=max(args.pretrain_steps // 2, 1),
+                              checkpoint_every=max(args.pretrain_steps // 2, 1),
+                              eval_samples=1024)
+        encoder = Pretrainer(pcfg, data, pre).train()  # its metrics.json
+        encoder_file = pre / "encoder.pt"
+        auroc = encoder.get("unseen_patch_auroc", float("nan"))
     print(f"[demo] encoder: unseen contact AUROC {auroc:.2f} (0.5 = chance; the shipped "
           "encoder's is 0.99 after 6,000 steps)", flush=True)
 
@@ -148,11 +171,11 @@ def _run(args, out: Path) -> int:
     objects = unseen_objects(library)
 
     _stage("4/6 the untrained policy on the unseen objects", t0)
-    before = evaluate_on(untrained_agent(cfg, pre / "encoder.pt"), cfg.env, objects,
+    before = evaluate_on(untrained_agent(cfg, encoder_file), cfg.env, objects,
                          args.eval_episodes, out / "eval_untrained.json", record=0)
 
     _stage(f"5/6 TD3 training of the policy, {args.train_steps} primitives", t0)
-    metrics = train_policy(run_dir, cfg, pre / "encoder.pt")
+    metrics = train_policy(run_dir, cfg, encoder_file)
 
     _stage("6/6 the trained policy, then the shipped one, on the same episodes", t0)
     trained = load_any_run(str(run_dir)).agent
@@ -167,6 +190,7 @@ def _run(args, out: Path) -> int:
                "unseen_objects": [i for i, _ in objects],
                "train_primitives": metrics["global_step"],
                "success": {"untrained": before, "trained": after, "shipped": shipped},
+               "encoder": "shipped" if shipped_encoder else "pretrained here",
                "encoder_unseen_auroc": auroc,
                "curve": [{"primitives": h["step"], "success_rate": h["success_rate"]}
                          for h in metrics["history"]],
@@ -175,6 +199,64 @@ def _run(args, out: Path) -> int:
     for line in closing_lines(summary, out, run_dir):
         print(line)
     return 0
+
+
+# The encoder the demo takes when pretraining would not fit (models/weights/NAME/encoder.pt).
+SHIPPED_ENCODER = "push_corn"
+# Where the demo keeps what it chose, so a rerun resumes with the same encoder.
+CHOICE_FILE = "encoder_choice.json"
+
+
+def shipped_encoder_file() -> Path:
+    from corn_drake.package_data import data_dir
+
+    return data_dir("models") / "weights" / SHIPPED_ENCODER / "encoder.pt"
+
+
+def _shipped_auroc() -> float:
+    """The shipped encoder's unseen contact AUROC, as its file records its pretraining."""
+    from corn_drake.rl.pretrained_encoders import load_encoder
+
+    record = load_encoder("corn", shipped_encoder_file()).pretraining or {}
+    return float(record.get("unseen_patch_auroc", float("nan")))
+
+
+def _budget(args, out: Path) -> bool:
+    """Times the probe, prints what the stages will take here now, and returns whether the
+    demo takes the shipped encoder. A rerun keeps the first run's choice (its CHOICE_FILE), so
+    a resumed demo never switches encoders half-way; an --encoder that contradicts it is
+    refused."""
+    import json
+
+    from corn_drake.commands import demo_budget
+    from corn_drake.storage.atomic_files import write_json
+
+    sizes = {"library": args.num_objects, "contact_data": args.num_samples,
+             "pretraining": args.pretrain_steps, "training": args.train_steps,
+             "evaluations": args.eval_episodes}
+    shipped, expected, slowdowns = demo_budget.plan(sizes, args.encoder)
+    chosen = out / CHOICE_FILE
+    if chosen.is_file():
+        before = json.loads(chosen.read_text())["encoder"]
+        if args.encoder not in ("auto", before):
+            raise InputError(f"--encoder {args.encoder}: {out} holds a demo built with the "
+                             f"{before} encoder; give --encoder {before} or auto, or a new --out")
+        shipped = before == "shipped"
+    else:
+        write_json(chosen, {"encoder": "shipped" if shipped else "pretrain",
+                            "slowdowns": slowdowns, "expected_seconds": expected})
+    if shipped:
+        expected["contact_data"] = expected["pretraining"] = 0.0
+    pace = ", ".join(f"{kind} work {factor:.1f}x" for kind, factor in slowdowns.items())
+    print(f"[demo] this machine now runs at these times a quiet project core's ({pace}): about "
+          f"{max(sum(expected.values()) / 60, 1):.0f} min, against a "
+          f"{demo_budget.BUDGET_S / 60:.0f}-minute budget"
+          + (f"; with the shipped CORN encoder ({SHIPPED_ENCODER}) in place of contact data and "
+             "pretraining here" + (" (--encoder shipped)" if args.encoder == "shipped" else
+                                   ", which would not fit (--encoder pretrain makes them)")
+             if shipped else "")
+          + ". Each stage's bar says what it has left.", flush=True)
+    return shipped
 
 
 def shipped_folder() -> Path:
@@ -273,8 +355,10 @@ def closing_lines(summary: dict, out: Path, run_dir: Path) -> list[str]:
         "[demo] the shipped policy trained 12,000 primitives with a 6,000-step encoder and "
         "reaches 0.84 on the 200 fixed unseen episodes (docs/results/README.md); the untrained "
         "policy succeeds where a random push happens to leave the object within 5 cm.",
-        f"[demo] built: {out}/library (objects), contact_data, pretrain/corn/encoder.pt, "
-        f"{run_dir} (the policy's run: checkpoints, tb/ for TensorBoard, "
+        f"[demo] built: {out}/library (objects), "
+        + ("" if summary.get("encoder") == "shipped"
+           else "contact_data, pretrain/corn/encoder.pt, ")
+        + f"{run_dir} (the policy's run: checkpoints, tb/ for TensorBoard, "
         f"plots/learning_curve.png), eval_*.json, eval_trained_recordings/ (Meshcat HTML: open "
         f"it in a browser), demo_summary.json.",
         f"[demo] next: corn-drake evaluate --run {run_dir} --objects {out}/library --split "
