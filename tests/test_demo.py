@@ -142,10 +142,11 @@ def test_the_untrained_policy_is_the_one_training_starts_from(tmp_path):
 def test_the_budget_takes_the_shipped_encoder_only_where_pretraining_would_not_fit(tmp_path,
                                                                                   capsys,
                                                                                   monkeypatch):
-    """`--encoder auto` decides from the probes' times (given here: no timing in a test): a
-    quiet project core pretrains, one running the demo's work 2.5x slower takes the shipped
-    encoder and says so; a rerun keeps the first choice, and an --encoder that contradicts it is
-    refused, naming both."""
+    """`--encoder auto` decides from the probes' times (given here: no timing in a test): at
+    400 pretraining steps and 1,200 primitives a quiet project core pretrains, one running the
+    demo's work 2.5x slower takes the shipped encoder and says so; at the default sizes even a
+    quiet core takes it (all five stages took 12.4 minutes there); a rerun keeps the first
+    choice, and an --encoder that contradicts it is refused, naming both."""
     from argparse import Namespace
 
     from corn_drake.commands import demo, demo_budget
@@ -153,8 +154,9 @@ def test_the_budget_takes_the_shipped_encoder_only_where_pretraining_would_not_f
 
     quiet = dict(demo_budget.REFERENCE_PROBE_S)
     busy = {k: 2.5 * v for k, v in quiet.items()}
-    sizes = dict(demo_budget.DEFAULT_SIZES)
+    sizes = {**demo_budget.DEFAULT_SIZES, "pretraining": 400, "training": 1200}
     assert demo_budget.plan(sizes, "auto", quiet)[0] is False
+    assert demo_budget.plan(dict(demo_budget.DEFAULT_SIZES), "auto", quiet)[0] is True
     shipped, expected, slowdowns = demo_budget.plan(sizes, "auto", busy)
     assert shipped and slowdowns == pytest.approx({"torch": 2.5, "python": 2.5})
     assert sum(expected.values()) > demo_budget.BUDGET_S

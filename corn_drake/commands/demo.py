@@ -1,9 +1,12 @@
-"""`corn-drake demo`: the pipeline end to end at a size that learns in about 7 minutes on one
-quiet CPU core, ending with a policy measurably better than the one it started from.
+"""`corn-drake demo`: the pipeline end to end in about ten minutes on one CPU core, ending with
+a policy measurably better than the one it started from.
 
-It times a short probe first (demo_budget.py) and prints what the stages will take on this
+It times two short probes first (demo_budget.py) and prints what the stages will take on this
 machine as busy as it is now; where contact data and pretraining would take it past ten
 minutes, it takes the shipped CORN encoder instead (`--encoder auto`, the default) and says so.
+On the project machine all six stages take 12.4 minutes on a quiet core, so there it takes the
+shipped encoder (9.2 minutes quiet, 9.9 beside a CPU-bound job); `--encoder pretrain` runs
+every stage (docs/results/demo/).
 
 1. object library: procedural objects, train and unseen families;
 2. contact data (Algorithm 1) from it; 3. contact pretraining of the CORN encoder;
@@ -40,8 +43,9 @@ EVAL_SEED = 1000
 LOG_EVERY = 200
 
 NAME = "demo"
-HELP = ("learn a push policy end to end in about 7 minutes on one core: library, contact "
-        "data, pretraining, TD3 training; prints its success before and after")
+HELP = ("learn a push policy end to end in about 10 minutes on one core: library, contact "
+        "data and pretraining (or the shipped encoder where they would not fit), TD3 training; "
+        "prints its success before and after")
 
 
 def add_arguments(parser):
