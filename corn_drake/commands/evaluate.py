@@ -44,7 +44,6 @@ HELP = ("evaluate a policy (a teacher, a contact-primitive policy, a student, a 
 
 def add_arguments(parser):
     from corn_drake.arguments.episode_workers import add_episode_workers
-
     from corn_drake.config.choices import SEGMENTATION_MODES
     from corn_drake.arguments.torch_threads import add_torch_threads_argument
 

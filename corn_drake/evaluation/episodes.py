@@ -200,8 +200,8 @@ def evaluate(agent, cfg, objects, episodes: int | range, record: int, seed: int,
     rows = []
     if rows_path is not None:
         settings = json.loads(json.dumps(settings))  # as it reads back
-        rows = [r for r in read_rows(rows_path, settings) if r["episode"] in episodes]
-        claim_range(rows_path, settings, episodes, read_rows(rows_path, settings))
+        rows = read_rows(rows_path, settings)
+        claim_range(rows_path, settings, episodes, rows)  # rows outside `episodes`: refused
     done = {r["episode"] for r in rows}
     if meshcat is None and (record > 0 or attention):
         from pydrake.geometry import Meshcat
