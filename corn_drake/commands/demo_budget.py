@@ -40,11 +40,12 @@ def pace_probe() -> dict[str, float]:
     that the host's jitter stays under a tenth)."""
     import torch
 
+    from corn_drake.contract import HAND_STATE_DIM
     from corn_drake.nn.encoders.corn_encoder import CORNEncoder
 
     torch.manual_seed(0)
     encoder = CORNEncoder()
-    clouds, hands = torch.randn(32, 512, 3), torch.randn(32, 9)
+    clouds, hands = torch.randn(32, 512, 3), torch.randn(32, HAND_STATE_DIM)
 
     def torch_work():
         for _ in range(4):
