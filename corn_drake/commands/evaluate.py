@@ -236,12 +236,14 @@ def _evaluate(args, report_path: Path, out_dir: Path):
         _remove_rows_of(report_path)
     meshcat = _open_meshcat() if args.keep_open else None
 
+    # What the report says of the run it measured; a policy's rows file keeps it in its settings.
+    measured = {"run": str(args.run), "policy": loaded.policy, **extra,
+                "overrides": [dataclasses.asdict(change) for change in overrides],
+                "actions": "sampled" if args.stochastic else "mean"}
+
     def complete_report(report: dict) -> dict:
-        report.update(extra)
-        report.update({"run": str(args.run), "policy": loaded.policy,
-                       "overrides": [dataclasses.asdict(change) for change in overrides],
-                       "split": args.split, "actions": "sampled" if args.stochastic else "mean",
-                       "library": _library_record(args, run_cfg.env)})
+        report.update(measured)
+        report.update({"split": args.split, "library": _library_record(args, run_cfg.env)})
         if args.objects:
             from corn_drake.assets.library import object_groups
 
@@ -266,10 +268,7 @@ def _evaluate(args, report_path: Path, out_dir: Path):
             # What makes this evaluation (a rerun with the same resumes its rows, another is
             # refused): the diagram, the episodes' objects and seed, the weights, the overrides.
             settings = {"runner": "diagram", **report_facts(cfg), "seed": args.seed,
-                        "objects": [o for o, _ in objects], "run": str(args.run),
-                        "policy": loaded.policy, **extra,
-                        "overrides": [dataclasses.asdict(change) for change in overrides],
-                        "actions": "sampled" if args.stochastic else "mean"}
+                        "objects": [o for o, _ in objects], **measured}
             with torch_threads(args.torch_threads):
                 report = evaluate(loaded.agent, cfg, objects,
                                   range(args.episodes_from, args.episodes), args.record,

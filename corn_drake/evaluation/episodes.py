@@ -259,12 +259,6 @@ def evaluate(agent, cfg, objects, episodes: int | range, record: int, seed: int,
     return report
 
 
-def _student_config_type():
-    from corn_drake.config.student import StudentDiagramConfig
-
-    return StudentDiagramConfig
-
-
 # A student's rows keep the tracking of every step (columns of TRACKING_STATS, as measured:
 # JSON gives a float back exactly) under this key, so a report of resumed or merged rows sums
 # its tracking over every step, as one process's does; the report's own rows leave it out.
@@ -292,7 +286,9 @@ def report_facts(cfg) -> dict:
     """What a policy report says of the diagram its episodes ran in (`cfg`): the task's name,
     the action's translation step at |a| = 1, and a student's segmentation (None for a
     teacher). Kept in the rows file's settings too, so merged parts report the same."""
-    student = isinstance(cfg, _student_config_type())
+    from corn_drake.config.student import StudentDiagramConfig
+
+    student = isinstance(cfg, StudentDiagramConfig)
     teacher_cfg = cfg.teacher if student else cfg
     return {"task": teacher_cfg.task.name,
             "action_step": teacher_cfg.controller.max_position_delta,
