@@ -125,3 +125,34 @@ def test_every_step_of_a_card_is_a_command_that_parses_today(name):
             parser.parse_args(command)
         except SystemExit:
             pytest.fail(f"{name}: today's parser refuses {' '.join(command)!r}")
+
+
+REBUILT = [name for name in CARDS
+           if "rebuild" in json.loads((WEIGHTS / name / "card.json").read_text())]
+
+
+def test_the_push_primitive_card_records_its_rebuild():
+    assert "push_primitive" in REBUILT  # issue 62: rebuilt from its card on this kind of machine
+
+
+@pytest.mark.parametrize("name", REBUILT)
+def test_a_rebuild_quotes_its_report_and_lands_inside_the_shipped_interval(name):
+    """A card's `rebuild` record: the report its rebuilt weights made on the card's evaluation
+    episodes says what the record quotes, and that success lies inside the 95 % Wilson interval
+    of the shipped weights' own report (what "the card rebuilds its weights" means here)."""
+    from corn_drake.evaluation.episode_rows import wilson
+
+    card = json.loads((WEIGHTS / name / "card.json").read_text())
+    rebuild = card["rebuild"]
+    report = json.loads((REPO_ROOT / rebuild["report"]).read_text())
+    assert report["complete"] and len(report["episodes"]) == card["episodes"]
+    assert (report["task"], report["split"]) == (card["task"], card["split"])
+    assert rebuild["success_rate"] == report["success_rate"]
+    # The same episodes as the shipped report's: object and seed, one by one.
+    shipped = json.loads((REPO_ROOT / card["report"]).read_text())
+    assert [(e["object"], e["seed"]) for e in report["episodes"]] == \
+        [(e["object"], e["seed"]) for e in shipped["episodes"]]
+    low, high = wilson(round(card["success_rate"] * card["episodes"]), card["episodes"])
+    assert low <= rebuild["success_rate"] <= high, (rebuild["success_rate"], low, high)
+    steps = rebuild["core_hours"]
+    assert steps and all(v > 0 for v in steps.values())

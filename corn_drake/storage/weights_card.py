@@ -33,6 +33,9 @@ FIELD_TYPES: dict[str, tuple[type, ...]] = {
     "complete": (bool,),
     "encoder": (dict, _NONE),
     **{k: (dict,) for k in ("outcome_model", "library_object_hashes", "bytes")},
+    # Written by hand after a rebuild from the card's own commands (issue 62): its report, its
+    # success and the core-hours each step took (tests/test_cards_are_recipes.py checks it).
+    "rebuild": (dict,),
 }
 # Mappings whose values must be of one type: object id -> content hash, file -> size.
 VALUE_TYPES = {"library_object_hashes": (str,), "bytes": (int,)}
