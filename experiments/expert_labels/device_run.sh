@@ -21,7 +21,11 @@
 # Settings: END (s from the start, default 560), GATE (processes on gate B, default 8),
 # GATE_FROM/GATE_TO (its episode range, default 40..200), LABEL_SEED (default 1), LEARNER
 # (a run folder in the checkout; default none: the expert acts), BETA, LABEL_EPISODES (per
-# process, default 12).
+# process, default 12). The issue's other evaluations of the expert, each split over its own
+# processes (default 0: not run), every part a report of its own to merge the same way:
+# AT_REST (the at-rest rule on the 200 full6d episodes: at_rest_*), PUSH_TURN (the 200
+# push_turn episodes: push_turn_*), KINDS (the first 40 with the analytic kinds beside the
+# policy's candidates: kinds_*). Label processes take the cores left of 16.
 set -u
 T0=$(date +%s)
 el() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
@@ -35,24 +39,37 @@ END=${END:-560}; GATE=${GATE:-8}; GATE_FROM=${GATE_FROM:-40}; GATE_TO=${GATE_TO:
 LABEL_SEED=${LABEL_SEED:-1}; LABEL_EPISODES=${LABEL_EPISODES:-12}
 LEARN=(); [ -n "${LEARNER:-}" ] && LEARN=(--learner "$LEARNER" --beta "${BETA:-0}")
 left=$(( END - ($(date +%s) - T0) ))
-span=$(( (GATE_TO - GATE_FROM + GATE - 1) / GATE ))
-el "$(nproc) cores; gate B $GATE_FROM..$GATE_TO in $GATE parts of $span; $((16 - GATE)) label parts; $left s"
-for p in $(seq 0 $((GATE - 1))); do
-  a=$(( GATE_FROM + p * span )); b=$(( a + span < GATE_TO ? a + span : GATE_TO ))
-  [ "$a" -lt "$b" ] || continue
-  timeout -k 10 $left cd_cli evaluate --run planner --objects data/library_unseen --split unseen \
-    --record 0 --episodes-from $a --episodes $b --no-progress \
-    --report runs/device_parts/gate_$a.json > runs/device_parts/gate_$a.log 2>&1 &
-done
-for p in $(seq 0 $((15 - GATE))); do
+el "$(nproc) cores; gate B $GATE_FROM..$GATE_TO in $GATE parts; $left s"
+# parts NAME COUNT FROM TO [evaluate settings...]: COUNT processes play episodes FROM..TO-1 of
+# the expert, each into runs/device_parts/NAME_<first episode>.json.
+parts() {
+  local name=$1 count=$2 from=$3 to=$4; shift 4
+  [ "$count" -gt 0 ] || return 0
+  local span=$(( (to - from + count - 1) / count )) p a b
+  for p in $(seq 0 $((count - 1))); do
+    a=$(( from + p * span )); b=$(( a + span < to ? a + span : to ))
+    [ "$a" -lt "$b" ] || continue
+    timeout -k 10 $left cd_cli evaluate --run planner --objects data/library_unseen \
+      --split unseen --record 0 --episodes-from $a --episodes $b --no-progress "$@" \
+      --report runs/device_parts/${name}_$a.json > runs/device_parts/${name}_$a.log 2>&1 &
+  done
+}
+parts gate "$GATE" "$GATE_FROM" "$GATE_TO"
+AT_REST=${AT_REST:-0}; PUSH_TURN=${PUSH_TURN:-0}; KINDS=${KINDS:-0}
+parts at_rest "$AT_REST" 0 200 --set primitive.success_at_rest=true
+parts push_turn "$PUSH_TURN" 0 200 --task push_turn
+parts kinds "$KINDS" 0 40 --set "planner.sources=[policy, push, turn, topple]"
+for p in $(seq 0 $((15 - GATE - AT_REST - PUSH_TURN - KINDS))); do
   a=$(( p * LABEL_EPISODES ))
   timeout -k 10 $left cd_cli label --objects data/library_train --seed $LABEL_SEED \
     --episodes-from $a --episodes $(( a + LABEL_EPISODES )) "${LEARN[@]}" --no-progress \
     --out runs/device_parts/label_$a > runs/device_parts/label_$a.log 2>&1 &
 done
 wait
-el "gate B episodes: $(cat runs/device_parts/gate_*.rows.jsonl 2>/dev/null | grep -c '"episode"')," \
-   "labelled episodes: $(cat runs/device_parts/label_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
+for name in gate at_rest push_turn kinds; do
+  el "$name episodes: $(cat runs/device_parts/${name}_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
+done
+el "labelled episodes: $(cat runs/device_parts/label_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
 grep -h -i "error\|Traceback" runs/device_parts/*.log | sort | uniq -c | head -5
 tar -C runs -cf - device_parts | xz -T16 -6 > /tmp/parts.tar.xz
 (cd "$OUT" && split -b 15M /tmp/parts.tar.xz parts.tar.xz.part)
