@@ -76,7 +76,7 @@ def test_readme_commands_parse_with_the_current_flags():
 _UNITS = sorted(p.name for p in (ROOT / "corn_drake").iterdir()
                 if p.is_dir() and not p.name.startswith("_"))
 # A path after --report or --out is what a command writes, not a citation.
-_CITED = (r"(?<![\w/.])(?<!--report )(?<!--out )((?:docs|experiments)/[\w./-]+\.(?:md|py|sh|json)|corn_drake/[\w/]+\.py"
+_CITED = (r"(?<![\w/.])(?<!--report )(?<!--out )((?:docs|experiments)/[\w./-]+\.(?:md|py|sh|jsonl|json)(?!\w)|corn_drake/[\w/]+\.py"
           r"|(?:" + "|".join(_UNITS) + r")/[\w/]+\.py)")
 
 
