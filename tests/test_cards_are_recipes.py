@@ -154,5 +154,10 @@ def test_a_rebuild_quotes_its_report_and_lands_inside_the_shipped_interval(name)
         [(e["object"], e["seed"]) for e in shipped["episodes"]]
     low, high = wilson(round(card["success_rate"] * card["episodes"]), card["episodes"])
     assert low <= rebuild["success_rate"] <= high, (rebuild["success_rate"], low, high)
+    at_rest = rebuild.get("at_rest_rule")
+    if at_rest is not None:  # the same weights under the at-rest rule, quoted as measured
+        measured = json.loads((REPO_ROOT / at_rest["report"]).read_text())
+        assert measured["success_rate"] == at_rest["success_rate"]
+        assert measured["weights_sha256"] == report["weights_sha256"]
     steps = rebuild["core_hours"]
     assert steps and all(v > 0 for v in steps.values())
