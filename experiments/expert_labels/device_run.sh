@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# The 6D expert's two long jobs on the lent 16-core machine, side by side until END seconds:
-# GATE processes play gate B's remaining episodes (`evaluate --run planner`, 200 fixed unseen
-# full6d episodes) and the rest label training objects (`corn-drake label`, one DAgger round).
+# The 6D expert's long jobs on the lent 16-core machine, side by side until END seconds: its
+# evaluations on the 200 fixed unseen episodes (`evaluate --run planner`: AT_REST, PUSH_TURN,
+# GATE processes) and, on the cores left, labels of training objects (`corn-drake label`, one
+# DAgger round).
 # Every process writes its own part (rows after each episode: a kill loses at most the episode in
 # progress); all parts come back as one xz tarball split under 15 MB.
 #
@@ -10,22 +11,24 @@
 #     | xz -6 > .device/libraries.tar.xz
 # With the device tool: carry .device/site_a.tar.xz, .device/site_small.tar.xz, .device/syslib,
 # .device/setup.sh, .device/cli.sh, .device/libraries.tar.xz; command
-#   GATE_FROM=<first unplayed gate B episode> LABEL_SEED=<new round's seed> \
+#   AT_REST=6 AT_REST_FROM=<first at-rest episode not in the committed rows> PUSH_TURN=6 \
+#   PUSH_TURN_FROM=<the same for push_turn> LABEL_SEED=<new round's seed> \
 #   bash experiments/expert_labels/device_run.sh
 # timeout 590. Back here (FILES_AT from the tool's answer):
 #   cat FILES_AT/parts.tar.xz.part* | xz -d | tar -C runs -xf -     # runs/device_parts/
-#   corn-drake merge-reports runs/device_parts/gate_*.rows.jsonl <the committed gate B rows> \
-#     --report docs/results/planner/eval_full6d_planner.json
+#   corn-drake merge-reports runs/device_parts/at_rest_*.rows.jsonl <the committed at-rest rows> \
+#     --report docs/results/planner/eval_full6d_planner_at_rest.json    # push_turn_* likewise
 #   corn-drake merge-reports runs/device_parts/label_*.rows.jsonl \
 #     --report models/labels/full6d/round<N>.json        # its .labels.jsonl.gz beside it
-# Settings: END (s from the start, default 560), GATE (processes on gate B, default 8),
-# GATE_FROM/GATE_TO (its episode range, default 40..200), LABEL_SEED (default 1), LEARNER
-# (a run folder in the checkout; default none: the expert acts), BETA, LABEL_EPISODES (per
-# process, default 12). The issue's other evaluations of the expert, each split over its own
-# processes (default 0: not run), every part a report of its own to merge the same way:
-# AT_REST (the at-rest rule on the 200 full6d episodes: at_rest_*), PUSH_TURN (the 200
-# push_turn episodes: push_turn_*), KINDS (the first 40 with the analytic kinds beside the
-# policy's candidates: kinds_*). Label processes take the cores left of 16.
+# Settings: END (s from the start, default 560), GATE (processes on gate B, default 0: its 200
+# are in), GATE_FROM/GATE_TO (its episode range, default 40..200), LABEL_SEED (default 1),
+# LEARNER (a run folder in the checkout; default none: the expert acts), BETA, LABEL_EPISODES
+# (per process, default 12). The issue's other evaluations of the expert, each split over its
+# own processes (default 0: not run), every part a report of its own to merge the same way:
+# AT_REST (the at-rest rule on the full6d episodes AT_REST_FROM..199: at_rest_*), PUSH_TURN
+# (the push_turn episodes PUSH_TURN_FROM..199: push_turn_*); set each FROM past the episodes
+# the committed rows already hold (merge-reports refuses an episode twice). Label processes
+# take the cores left of 16.
 set -u
 T0=$(date +%s)
 el() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
@@ -35,7 +38,7 @@ export PYTHONPATH=/tmp/site:$PWD LD_LIBRARY_PATH=/tmp/syslib
 cd_cli() { python3 -c 'import sys; from corn_drake.cli import main; sys.exit(main())' "$@"; }
 mkdir -p data runs/device_parts "$OUT"
 [ -d data/library_train ] || tar -C data -xJf .device/libraries.tar.xz
-END=${END:-560}; GATE=${GATE:-8}; GATE_FROM=${GATE_FROM:-40}; GATE_TO=${GATE_TO:-200}
+END=${END:-560}; GATE=${GATE:-0}; GATE_FROM=${GATE_FROM:-40}; GATE_TO=${GATE_TO:-200}
 LABEL_SEED=${LABEL_SEED:-1}; LABEL_EPISODES=${LABEL_EPISODES:-12}
 LEARN=(); [ -n "${LEARNER:-}" ] && LEARN=(--learner "$LEARNER" --beta "${BETA:-0}")
 left=$(( END - ($(date +%s) - T0) ))
@@ -55,18 +58,17 @@ parts() {
   done
 }
 parts gate "$GATE" "$GATE_FROM" "$GATE_TO"
-AT_REST=${AT_REST:-0}; PUSH_TURN=${PUSH_TURN:-0}; KINDS=${KINDS:-0}
-parts at_rest "$AT_REST" 0 200 --set primitive.success_at_rest=true
-parts push_turn "$PUSH_TURN" 0 200 --task push_turn
-parts kinds "$KINDS" 0 40 --set "planner.sources=[policy, push, turn, topple]"
-for p in $(seq 0 $((15 - GATE - AT_REST - PUSH_TURN - KINDS))); do
+AT_REST=${AT_REST:-0}; PUSH_TURN=${PUSH_TURN:-0}
+parts at_rest "$AT_REST" "${AT_REST_FROM:-0}" 200 --set primitive.success_at_rest=true
+parts push_turn "$PUSH_TURN" "${PUSH_TURN_FROM:-0}" 200 --task push_turn
+for p in $(seq 0 $((15 - GATE - AT_REST - PUSH_TURN))); do
   a=$(( p * LABEL_EPISODES ))
   timeout -k 10 $left cd_cli label --objects data/library_train --seed $LABEL_SEED \
     --episodes-from $a --episodes $(( a + LABEL_EPISODES )) "${LEARN[@]}" --no-progress \
     --out runs/device_parts/label_$a > runs/device_parts/label_$a.log 2>&1 &
 done
 wait
-for name in gate at_rest push_turn kinds; do
+for name in gate at_rest push_turn; do
   el "$name episodes: $(cat runs/device_parts/${name}_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
 done
 el "labelled episodes: $(cat runs/device_parts/label_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
