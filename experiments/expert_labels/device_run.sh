@@ -11,8 +11,7 @@
 #     | xz -6 > .device/libraries.tar.xz
 # With the device tool: carry .device/site_a.tar.xz, .device/site_small.tar.xz, .device/syslib,
 # .device/setup.sh, .device/cli.sh, .device/libraries.tar.xz; command
-#   AT_REST=6 AT_REST_FROM=<first at-rest episode not in the committed rows> PUSH_TURN=6 \
-#   PUSH_TURN_FROM=<the same for push_turn> LABEL_SEED=<new round's seed> \
+#   AT_REST=6 PUSH_TURN=6 LABEL_SEED=<new round's seed> \
 #   bash experiments/expert_labels/device_run.sh
 # timeout 590. Back here (FILES_AT from the tool's answer):
 #   cat FILES_AT/parts.tar.xz.part* | xz -d | tar -C runs -xf -     # runs/device_parts/
@@ -26,9 +25,10 @@
 # (per process, default 12). The issue's other evaluations of the expert, each split over its
 # own processes (default 0: not run), every part a report of its own to merge the same way:
 # AT_REST (the at-rest rule on the full6d episodes AT_REST_FROM..199: at_rest_*), PUSH_TURN
-# (the push_turn episodes PUSH_TURN_FROM..199: push_turn_*); set each FROM past the episodes
-# the committed rows already hold (merge-reports refuses an episode twice). Label processes
-# take the cores left of 16.
+# (the push_turn episodes PUSH_TURN_FROM..199: push_turn_*); each FROM defaults to the episode
+# after the last one its committed rows hold (merge-reports refuses an episode twice; one the
+# committed run left unplayed before that is said missing by the merge and played by its
+# resume here). Label processes take the cores left of 16.
 set -u
 T0=$(date +%s)
 el() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
@@ -58,9 +58,19 @@ parts() {
   done
 }
 parts gate "$GATE" "$GATE_FROM" "$GATE_TO"
+# after_rows ROWS: the episode after the highest that the rows file ROWS holds (0 for none).
+after_rows() {
+  python3 -c 'import json, sys
+from pathlib import Path
+p = Path(sys.argv[1])
+rows = [json.loads(l) for l in p.read_text().splitlines()[1:] if l.strip()] if p.exists() else []
+print(max((r["episode"] for r in rows), default=-1) + 1)' "$1"
+}
 AT_REST=${AT_REST:-0}; PUSH_TURN=${PUSH_TURN:-0}
-parts at_rest "$AT_REST" "${AT_REST_FROM:-0}" 200 --set primitive.success_at_rest=true
-parts push_turn "$PUSH_TURN" "${PUSH_TURN_FROM:-0}" 200 --task push_turn
+AT_REST_FROM=${AT_REST_FROM:-$(after_rows docs/results/planner/eval_full6d_planner_at_rest.rows.jsonl)}
+PUSH_TURN_FROM=${PUSH_TURN_FROM:-$(after_rows docs/results/planner/eval_push_turn_planner.rows.jsonl)}
+parts at_rest "$AT_REST" "$AT_REST_FROM" 200 --set primitive.success_at_rest=true
+parts push_turn "$PUSH_TURN" "$PUSH_TURN_FROM" 200 --task push_turn
 for p in $(seq 0 $((15 - GATE - AT_REST - PUSH_TURN))); do
   a=$(( p * LABEL_EPISODES ))
   timeout -k 10 $left cd_cli label --objects data/library_train --seed $LABEL_SEED \
