@@ -59,8 +59,6 @@ parts() {
 }
 parts gate "$GATE" "$GATE_FROM" "$GATE_TO"
 # after_rows ROWS: the episode after the highest that the rows file ROWS holds (0 for none).
-# A gap below it (an episode in flight when a run here was stopped) is left to the resume here,
-# which plays every episode its rows lack.
 after_rows() {
   python3 -c 'import json, sys
 from pathlib import Path
