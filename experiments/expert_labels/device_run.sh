@@ -1,8 +1,7 @@
 #!/usr/bin/env bash
 # The 6D expert's long jobs on the lent 16-core machine, side by side until END seconds: its
-# evaluations on the 200 fixed unseen episodes (`evaluate --run planner`: PUSH_TURN, GATE
-# processes) and, on the cores left, labels of training objects (`corn-drake label`, one
-# DAgger round).
+# evaluations on the 200 fixed unseen episodes (`evaluate --run planner`: GATE processes) and,
+# on the cores left, labels of training objects (`corn-drake label`, one DAgger round).
 # Every process writes its own part (rows after each episode: a kill loses at most the episode in
 # progress); all parts come back as one xz tarball split under 15 MB.
 #
@@ -11,23 +10,17 @@
 #     | xz -6 > .device/libraries.tar.xz
 # With the device tool: carry .device/site_a.tar.xz, .device/site_small.tar.xz, .device/syslib,
 # .device/setup.sh, .device/cli.sh, .device/libraries.tar.xz; command
-#   PUSH_TURN=8 LABEL_SEED=<new round's seed> \
+#   LABEL_SEED=<new round's seed> \
 #   bash experiments/expert_labels/device_run.sh
 # timeout 590. Back here (FILES_AT from the tool's answer):
 #   cat FILES_AT/parts.tar.xz.part* | xz -d | tar -C runs -xf -     # runs/device_parts/
-#   corn-drake merge-reports runs/device_parts/push_turn_*.rows.jsonl <the committed push_turn rows> \
-#     --report docs/results/planner/eval_push_turn_planner.json
 #   corn-drake merge-reports runs/device_parts/label_*.rows.jsonl \
 #     --report models/labels/full6d/round<N>.json        # its .labels.jsonl.gz beside it
 # Settings: END (s from the start, default 560), GATE (processes on gate B, default 0: its 200
 # are in), GATE_FROM/GATE_TO (its episode range, default 40..200), LABEL_SEED (default 1),
 # LEARNER (a run folder in the checkout; default none: the expert acts), BETA, LABEL_EPISODES
-# (per process, default 12). PUSH_TURN: processes (default 0: not run) on the issue's last
-# evaluation of the expert, the push_turn episodes PUSH_TURN_FROM..199 (push_turn_*, every part a
-# report of its own to merge the same way; the at-rest rule's 200 are in); PUSH_TURN_FROM
-# defaults to the episode after the last one its committed rows hold (merge-reports refuses an
-# episode twice; one the committed run left unplayed before that is said missing by the merge
-# and played by its resume here). Label processes take the cores left of 16.
+# (per process, default 12). The issue's other evaluations (the at-rest rule, push_turn) have
+# their 200 in. Label processes take the cores left of 16.
 set -u
 T0=$(date +%s)
 el() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
@@ -57,27 +50,14 @@ parts() {
   done
 }
 parts gate "$GATE" "$GATE_FROM" "$GATE_TO"
-# after_rows ROWS: the episode after the highest that the rows file ROWS holds (0 for none).
-after_rows() {
-  python3 -c 'import json, sys
-from pathlib import Path
-p = Path(sys.argv[1])
-rows = [json.loads(l) for l in p.read_text().splitlines()[1:] if l.strip()] if p.exists() else []
-print(max((r["episode"] for r in rows), default=-1) + 1)' "$1"
-}
-PUSH_TURN=${PUSH_TURN:-0}
-PUSH_TURN_FROM=${PUSH_TURN_FROM:-$(after_rows docs/results/planner/eval_push_turn_planner.rows.jsonl)}
-parts push_turn "$PUSH_TURN" "$PUSH_TURN_FROM" 200 --task push_turn
-for p in $(seq 0 $((15 - GATE - PUSH_TURN))); do
+for p in $(seq 0 $((15 - GATE))); do
   a=$(( p * LABEL_EPISODES ))
   timeout -k 10 $left cd_cli label --objects data/library_train --seed $LABEL_SEED \
     --episodes-from $a --episodes $(( a + LABEL_EPISODES )) "${LEARN[@]}" --no-progress \
     --out runs/device_parts/label_$a > runs/device_parts/label_$a.log 2>&1 &
 done
 wait
-for name in gate push_turn; do
-  el "$name episodes: $(cat runs/device_parts/${name}_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
-done
+el "gate episodes: $(cat runs/device_parts/gate_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
 el "labelled episodes: $(cat runs/device_parts/label_*.rows.jsonl 2>/dev/null | grep -c '"episode"')"
 grep -h -i "error\|Traceback" runs/device_parts/*.log | sort | uniq -c | head -5
 tar -C runs -cf - device_parts | xz -T16 -6 > /tmp/parts.tar.xz
