@@ -43,6 +43,17 @@ def test_every_shipped_folder_loads_as_its_kind_with_its_weights(name):
     assert fields["env_steps"] > 0 and re.fullmatch("[0-9a-f]{64}", fields["weights_sha256"])
 
 
+def test_the_card_evaluate_checks_the_library_against_is_the_runs_or_the_experts_policys():
+    # A shipped folder's own card; the expert's is its policy source's run (the candidates it
+    # searches were learned and measured on that card's library); none without that source.
+    assert load_any_run(EXAMPLE["primitive"]).card_run() == EXAMPLE["primitive"]
+    expert = load_any_run("planner")
+    expert.configure(None, ["planner.policy=models/weights/push_primitive"])
+    assert expert.card_run() == "models/weights/push_primitive"
+    expert.configure(None, ["planner.sources=[push,turn]"])
+    assert expert.card_run() is None
+
+
 @pytest.mark.parametrize("name, flag", [(n, f) for n in EXAMPLE for f in KIND_FLAGS
                                         if f not in RUN_KINDS[n].FLAGS])
 def test_a_flag_the_kind_does_not_take_is_refused_naming_both(tmp_path, capsys, name, flag):

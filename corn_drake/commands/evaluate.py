@@ -116,7 +116,7 @@ def _whole_library(obj) -> str:
     return obj.library if obj.cycles_library else ""
 
 
-def _object_specs(args, cfg):
+def _object_specs(args, cfg, card_run: str | None):
     # --objects, else the run's library when it was trained on a whole one: its --split objects.
     library = args.objects or _whole_library(cfg.scene.object)
     if not library:
@@ -129,6 +129,7 @@ def _object_specs(args, cfg):
 
     # A shipped folder's card: a missing library names the command that builds it; another
     # library than the card's gets a warning (its episodes cannot match the card's report).
+    # `card_run` is the run whose card says so (the expert's: its policy source's run).
     require_library(args.run, library, given=bool(args.objects))
     ids = list_objects(library, None if args.split == "all" else args.split)
     if not ids:
@@ -136,7 +137,8 @@ def _object_specs(args, cfg):
 
         raise InputError(f"no {args.split} objects in library {library}"
                          f"{empty_split_hint(library, args.split)}")
-    warn_if_other_library(args.run, library, ids)
+    if card_run:
+        warn_if_other_library(card_run, library, ids)
     skipped = [i for i in list_objects(library) if i not in set(ids)]
     if skipped:  # a library of one's own meshes is split too: say what is left out
         shown = ", ".join(skipped[:6]) + (f" and {len(skipped) - 6} more" if len(skipped) > 6
@@ -218,7 +220,7 @@ def _evaluate(args, report_path: Path, out_dir: Path):
     cfg.check()  # an override no episode can be built from, before any episode
     print(f"evaluate {args.run} on task {cfg.task.name}"
           + "".join(f"; {change}" for change in overrides))
-    objects = _object_specs(args, cfg)
+    objects = _object_specs(args, cfg, loaded.card_run())
     # Which weights were measured (checkpoint, env_steps): what `ship` checks a report against.
     extra = loaded.report_fields()
     # A student is evaluated through the full chain unless --perception says otherwise.

@@ -91,6 +91,11 @@ class LoadedRun:
         return {"env_steps": self.env_steps, "checkpoint": self.checkpoint_file,
                 "weights_sha256": self.weights_hash()}
 
+    def card_run(self) -> str | None:
+        """The shipped folder whose card says which object library this run's numbers were
+        measured on (evaluate warns when given another): the run itself by default."""
+        return self.run
+
     def configure(self, task: str | None, sets: list[str]):
         """(the TrainConfig-like config the episodes run, the overrides it makes of the run's
         own: config.overrides.config_changes rows) for `--task` (None: the run's own task) and
