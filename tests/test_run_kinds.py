@@ -48,8 +48,8 @@ def test_the_card_evaluate_checks_the_library_against_is_the_runs_or_the_experts
     # searches were learned and measured on that card's library); none without that source.
     assert load_any_run(EXAMPLE["primitive"]).card_run() == EXAMPLE["primitive"]
     expert = load_any_run("planner")
-    expert.configure(None, ["planner.policy=models/weights/push_primitive"])
-    assert expert.card_run() == "models/weights/push_primitive"
+    expert.configure(None, [f"planner.policy={EXAMPLE['primitive']}"])
+    assert expert.card_run() == EXAMPLE["primitive"]
     expert.configure(None, ["planner.sources=[push,turn]"])
     assert expert.card_run() is None
 
