@@ -129,7 +129,9 @@ def _object_specs(args, cfg, card_run: str | None):
 
     # A shipped folder's card: a missing library names the command that builds it; another
     # library than the card's gets a warning (its episodes cannot match the card's report).
-    # `card_run` is the run whose card says so (the expert's: its policy source's run).
+    # The missing-library error stays with --run's own card (where the default library path
+    # comes from); the warning reads `card_run`'s, whose numbers the episodes should match (the
+    # expert's: its policy source's run).
     require_library(args.run, library, given=bool(args.objects))
     ids = list_objects(library, None if args.split == "all" else args.split)
     if not ids:

@@ -192,8 +192,9 @@ class PlannerRun(LoadedRun):
     def card_run(self) -> str | None:
         """The run the `policy` source proposes with (after configure): its card names the
         library the expert's candidates were learned and measured on; None without that source."""
-        config = self.agent.config if self.agent is not None else None
-        return config.policy if config is not None and "policy" in config.sources else None
+        if self.agent is None or "policy" not in self.agent.config.sources:
+            return None
+        return self.agent.config.policy
 
 
 # Every kind, in the order help texts list them: adding a kind is one class above and its name
