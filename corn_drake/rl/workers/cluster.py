@@ -38,6 +38,10 @@ joined_cluster = False
 # worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
 PLACEMENT_NOTICE_S = 60.0
 
+# How often a pending replacement worker's room is checked again (spawn_replacement): Ray marks
+# a lost node dead seconds after its workers' deaths are seen.
+ROOM_RECHECK_S = 2.0
+
 
 class NoRoomForWorkers(InputError):
     """The cluster's live nodes cannot host the workers asked for (one line, exit 2; a run's
@@ -208,11 +212,24 @@ def start_pool(pool, factory, num_workers: int, kind: str) -> None:
 
 def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
     """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
-    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept)."""
+    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept).
+
+    The room is checked again while the replacement is pending: a worker's death can reach the
+    driver before Ray marks its node dead (a CI run here saw the replacement created 0.25 s
+    before the node's death was known), so the first check may count a lost node's CPUs, and a
+    replacement that fits nowhere would otherwise wait forever."""
     with contextlib.suppress(Exception):
         ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
-    check_room(len(workers), cpus, f"replacing {record.kind} worker {i}")
+    what = f"replacing {record.kind} worker {i}"
+    check_room(len(workers), cpus, what)
     workers[i] = spawn()
+    started = workers[i].node.remote()
+    while not ray.wait([started], timeout=ROOM_RECHECK_S)[0]:
+        try:
+            check_room(len(workers), cpus, what)
+        except NoRoomForWorkers:
+            ray.kill(workers[i])  # pending: it must not take a node's room when one joins
+            raise
 
 
 # --- the object library through the object store ------------------------------------------
