@@ -74,3 +74,46 @@ def test_a_replacement_with_room_is_waited_for_and_recorded(one_cpu_ray):
     assert death["replacement_node"] == ray.get_runtime_context().get_node_id()
     for w in workers:
         ray.kill(w)
+
+
+def _pool_worker(tmp_path):
+    """A job worker whose first "die" job ends its process (as a lost node's would)."""
+    import os
+
+    marker = tmp_path / "died_once"
+
+    class JobWorker(WorkerBase):
+        def do(self, job):
+            if job == "die" and not marker.exists():
+                marker.write_text("x")
+                os._exit(1)
+            return job
+
+    return ray.remote(JobWorker)
+
+
+def test_a_job_pool_with_no_room_for_a_replacement_goes_on_with_the_others(
+        one_cpu_ray, monkeypatch, capsys, tmp_path):
+    from corn_drake.rl.workers.job_pool import run_on_pool
+
+    Worker = _pool_worker(tmp_path)
+    monkeypatch.setattr(cluster, "hosting_slots", lambda cpus: 1)  # the dead one's node is gone
+    done = []
+    run_on_pool(lambda: Worker.options(num_cpus=0.5).remote(), 2, 0.5,
+                ["die", "a", "b", "c"], lambda w, job: w.do.remote(job),
+                lambda job, result: done.append(result), "test", lambda job: f"job {job}")
+    assert sorted(done) == ["a", "b", "c", "die"]  # every job once, "die" played again
+    lines = [line for line in capsys.readouterr().out.splitlines() if "test worker" in line]
+    assert len(lines) == 1 and "no room for a replacement, job die goes to the other 1" in lines[0]
+
+
+def test_a_job_pool_whose_last_worker_dies_with_no_room_says_so(one_cpu_ray, monkeypatch,
+                                                                 tmp_path):
+    from corn_drake.rl.workers.job_pool import run_on_pool
+
+    Worker = _pool_worker(tmp_path)
+    monkeypatch.setattr(cluster, "hosting_slots", lambda cpus: 0)
+    with pytest.raises(NoRoomForWorkers, match="replacing test worker 0"):
+        run_on_pool(lambda: Worker.options(num_cpus=0.5).remote(), 1, 0.5, ["die", "a"],
+                    lambda w, job: w.do.remote(job), lambda job, result: None, "test",
+                    lambda job: f"job {job}")

@@ -60,5 +60,5 @@ def play_on_workers(jobs: list[tuple], policy, cfg, labeller_facts, library, wor
         return PlannerEpisodeWorker.options(**worker_options(cpus)).remote(
             policy, cfg, labeller_facts, packed)
 
-    run_on_pool(spawn, workers, jobs, lambda w, job: w.play.remote(*job),
+    run_on_pool(spawn, workers, cpus, jobs, lambda w, job: w.play.remote(*job),
                 lambda job, row: done(row), "planner", lambda job: f"episode {job[0]}")

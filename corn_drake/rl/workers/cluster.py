@@ -38,7 +38,7 @@ joined_cluster = False
 # worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
 PLACEMENT_NOTICE_S = 60.0
 
-# How often a pending replacement worker's room is checked again (spawn_replacement): Ray marks
+# How often a pending replacement worker's room is checked again (start_replacement): Ray marks
 # a lost node dead seconds after its workers' deaths are seen.
 ROOM_RECHECK_S = 2.0
 
@@ -210,26 +210,33 @@ def start_pool(pool, factory, num_workers: int, kind: str) -> None:
     pool.restarts = 0
 
 
-def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
-    """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
-    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept).
+def start_replacement(spawn, needed: int, cpus: float, what: str):
+    """A new worker from `spawn()`, waited for until it has started, when the live nodes have
+    room for `needed` workers of `cpus` CPUs; NoRoomForWorkers (naming `what`) otherwise.
 
     The room is checked again while the replacement is pending: a worker's death can reach the
     driver before Ray marks its node dead (a CI run here saw the replacement created 0.25 s
     before the node's death was known), so the first check may count a lost node's CPUs, and a
-    replacement that fits nowhere would otherwise wait forever."""
-    with contextlib.suppress(Exception):
-        ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
-    what = f"replacing {record.kind} worker {i}"
-    check_room(len(workers), cpus, what)
-    workers[i] = spawn()
-    started = workers[i].node.remote()
+    replacement that fits nowhere would otherwise be waited for forever."""
+    check_room(needed, cpus, what)
+    actor = spawn()
+    started = actor.node.remote()
     while not ray.wait([started], timeout=ROOM_RECHECK_S)[0]:
         try:
-            check_room(len(workers), cpus, what)
+            check_room(needed, cpus, what)
         except NoRoomForWorkers:
-            ray.kill(workers[i])  # pending: it must not take a node's room when one joins
+            ray.kill(actor)  # pending: it must not take a node's room when one joins
             raise
+    return actor
+
+
+def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
+    """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
+    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept)."""
+    with contextlib.suppress(Exception):
+        ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
+    workers[i] = start_replacement(spawn, len(workers), cpus,
+                                   f"replacing {record.kind} worker {i}")
 
 
 # --- the object library through the object store ------------------------------------------

@@ -5,22 +5,27 @@ episodes), so playing it again on a new worker loses or doubles nothing."""
 
 from __future__ import annotations
 
+import contextlib
+
 import ray
 
 
-def run_on_pool(spawn, workers: int, jobs: list, submit, done, name: str, describe) -> None:
-    """Runs `jobs` on min(`workers`, len(jobs)) workers made by `spawn()`, one job per worker
-    at a time: `submit(worker, job)` starts it (an object ref), `done(job, result)` runs in the
-    driver as each ends. A worker that dies is replaced and its job ("`describe(job)`") put
-    first in the queue again, said in one line naming the `name` worker."""
-    from corn_drake.rl.workers.cluster import death_reason
+def run_on_pool(spawn, workers: int, cpus: float, jobs: list, submit, done, name: str,
+                describe) -> None:
+    """Runs `jobs` on min(`workers`, len(jobs)) workers of `cpus` CPUs made by `spawn()`, one
+    job per worker at a time: `submit(worker, job)` starts it (an object ref), `done(job,
+    result)` runs in the driver as each ends. A worker that dies is replaced and its job
+    ("`describe(job)`") put first in the queue again, said in one line naming the `name`
+    worker. When the live nodes have no room for the replacement (its node was lost), the
+    others go on without it, said in one line; NoRoomForWorkers when none is left."""
+    from corn_drake.rl.workers.cluster import NoRoomForWorkers, death_reason, start_replacement
 
     pool = [spawn() for _ in range(min(workers, len(jobs)))]
     pending, running = list(jobs), {}
     while pending or running:
         busy = {i for i, _ in running.values()}
         for i, worker in enumerate(pool):
-            if pending and i not in busy:
+            if pending and worker is not None and i not in busy:
                 job = pending.pop(0)
                 running[submit(worker, job)] = (i, job)
                 busy.add(i)
@@ -29,9 +34,21 @@ def run_on_pool(spawn, workers: int, jobs: list, submit, done, name: str, descri
         try:
             result = ray.get(ready[0])
         except (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError) as error:
-            print(f"{name} worker {i} died ({death_reason(error)}): {describe(job)} goes to a "
-                  "new worker", flush=True)
-            pool[i] = spawn()
             pending.insert(0, job)
+            reason = death_reason(error)
+            alive = sum(w is not None for w in pool)
+            with contextlib.suppress(Exception):
+                ray.kill(pool[i])  # an unreachable one must not come back beside its replacement
+            try:
+                pool[i] = start_replacement(spawn, alive, cpus, f"replacing {name} worker {i}")
+            except NoRoomForWorkers:
+                pool[i] = None
+                if alive == 1:
+                    raise
+                print(f"{name} worker {i} died ({reason}): no room for a replacement, "
+                      f"{describe(job)} goes to the other {alive - 1}", flush=True)
+                continue
+            print(f"{name} worker {i} died ({reason}): {describe(job)} goes to a new worker",
+                  flush=True)
             continue
         done(job, result)

@@ -47,6 +47,6 @@ def collect_on_workers(collection, library, workers: int, done) -> None:
     def spawn():
         return OutcomeChunkWorker.options(**worker_options(cpus)).remote(shared, packed)
 
-    run_on_pool(spawn, workers, collection.chunks, lambda w, job: w.collect.remote(*job),
+    run_on_pool(spawn, workers, cpus, collection.chunks, lambda w, job: w.collect.remote(*job),
                 lambda job, result: done(job[0], *result), "outcome",
                 lambda job: f"episodes {job[0]}-{job[1] - 1}")
