@@ -117,3 +117,14 @@ def test_a_job_pool_whose_last_worker_dies_with_no_room_says_so(one_cpu_ray, mon
         run_on_pool(lambda: Worker.options(num_cpus=0.5).remote(), 1, 0.5, ["die", "a"],
                     lambda w, job: w.do.remote(job), lambda job, result: None, "test",
                     lambda job: f"job {job}")
+
+
+def test_workers_still_pending_when_a_node_is_lost_stop_with_no_room(one_cpu_ray, monkeypatch):
+    """A pool's first placement (WorkerRecord.placed) re-checks the room while a worker is
+    pending: the room its start counted is gone (one CPU for two workers of one)."""
+    monkeypatch.setattr(cluster, "ROOM_RECHECK_S", 0.2)
+    workers = [_worker(1.0), _worker(1.0)]  # the second cannot start beside the first
+    with pytest.raises(NoRoomForWorkers, match="rollout workers: .* room for 1 worker"):
+        WorkerRecord("rollout").placed(workers, 1.0)
+    for w in workers:
+        ray.kill(w)

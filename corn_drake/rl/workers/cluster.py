@@ -23,6 +23,7 @@ import hashlib
 import math
 import os
 import socket
+import time
 from pathlib import Path
 
 import ray
@@ -38,8 +39,8 @@ joined_cluster = False
 # worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
 PLACEMENT_NOTICE_S = 60.0
 
-# How often a pending replacement worker's room is checked again (start_replacement): Ray marks
-# a lost node dead seconds after its workers' deaths are seen.
+# How often the room of a pending worker is checked again (placed, start_replacement): Ray
+# marks a lost node dead seconds after its workers' deaths are seen.
 ROOM_RECHECK_S = 2.0
 
 
@@ -162,14 +163,22 @@ class WorkerRecord:
     def placed(self, actors: list, cpus: float) -> None:
         """Waits for every worker to start and records its node. Workers still waiting after
         PLACEMENT_NOTICE_S are named in one line: Ray leaves a worker pending, silently, while
-        the CPUs it asks for are held by others (check_room counts capacity, not use)."""
+        the CPUs it asks for are held by others (check_room counts capacity, not use). The room
+        is checked again while any is pending: a node lost meanwhile raises NoRoomForWorkers
+        instead of a wait without end (start_replacement says why)."""
         refs = [a.node.remote() for a in actors]
-        _, pending = ray.wait(refs, num_returns=len(refs), timeout=PLACEMENT_NOTICE_S)
-        if pending:
-            free = ray.available_resources().get("CPU", 0.0)
-            print(f"{len(pending)} {self.kind} worker(s) not started after "
-                  f"{PLACEMENT_NOTICE_S:.0f} s ({free:g} CPUs free in the Ray cluster, each "
-                  f"worker asks {cpus:g}): still waiting", flush=True)
+        start, noticed = time.monotonic(), False
+        while True:
+            _, pending = ray.wait(refs, num_returns=len(refs), timeout=ROOM_RECHECK_S)
+            if not pending:
+                break
+            check_room(len(actors), cpus, f"{self.kind} workers")
+            if not noticed and time.monotonic() - start >= PLACEMENT_NOTICE_S:
+                free = ray.available_resources().get("CPU", 0.0)
+                print(f"{len(pending)} {self.kind} worker(s) not started after "
+                      f"{PLACEMENT_NOTICE_S:.0f} s ({free:g} CPUs free in the Ray cluster, "
+                      f"each worker asks {cpus:g}): still waiting", flush=True)
+                noticed = True
         self.nodes = ray.get(refs)
 
     def replaced(self, i: int, error: Exception, actor, during: str) -> None:
