@@ -50,7 +50,7 @@ def test_a_replacement_that_fits_nowhere_stops_with_no_room_even_if_the_first_ch
         return spawned[-1]
 
     with pytest.raises(NoRoomForWorkers) as stopped:
-        cluster.spawn_replacement(WorkerRecord("rollout"), workers, 1, 1.0, spawn)
+        cluster.spawn_replacement("rollout", workers, 1, 1.0, spawn)
     assert "replacing rollout worker 1" in str(stopped.value)
     assert "room for 1 worker" in str(stopped.value), stopped.value
     assert len(spawned) == 1 and len(calls) >= 2
@@ -66,7 +66,7 @@ def test_a_replacement_with_room_is_waited_for_and_recorded(one_cpu_ray):
     record = WorkerRecord("rollout")
     record.nodes = ray.get([w.node.remote() for w in workers])
     old = workers[1]
-    cluster.spawn_replacement(record, workers, 1, 0.5, lambda: _worker(0.5))
+    cluster.spawn_replacement("rollout", workers, 1, 0.5, lambda: _worker(0.5))
     assert workers[1] is not old
     record.replaced(1, RuntimeError("its node died"), workers[1], "in a test")
     [death] = record.deaths

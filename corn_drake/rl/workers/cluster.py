@@ -39,7 +39,7 @@ joined_cluster = False
 # worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
 PLACEMENT_NOTICE_S = 60.0
 
-# How often the room of a pending worker is checked again (placed, start_replacement): Ray
+# How often the room of a pending worker is checked again (placed, spawn_replacement): Ray
 # marks a lost node dead seconds after its workers' deaths are seen.
 ROOM_RECHECK_S = 2.0
 
@@ -165,7 +165,7 @@ class WorkerRecord:
         PLACEMENT_NOTICE_S are named in one line: Ray leaves a worker pending, silently, while
         the CPUs it asks for are held by others (check_room counts capacity, not use). The room
         is checked again while any is pending: a node lost meanwhile raises NoRoomForWorkers
-        instead of a wait without end (start_replacement says why)."""
+        instead of a wait without end (spawn_replacement says why)."""
         refs = [a.node.remote() for a in actors]
         start, noticed = time.monotonic(), False
         while True:
@@ -219,14 +219,18 @@ def start_pool(pool, factory, num_workers: int, kind: str) -> None:
     pool.restarts = 0
 
 
-def start_replacement(spawn, needed: int, cpus: float, what: str):
-    """A new worker from `spawn()`, waited for until it has started, when the live nodes have
-    room for `needed` workers of `cpus` CPUs; NoRoomForWorkers (naming `what`) otherwise.
+def spawn_replacement(kind: str, workers: list, i: int, cpus: float, spawn) -> None:
+    """`kind` worker `i` replaced by `spawn()`, waited for until it has started, when the live
+    nodes have room for it beside the others (the slots of `workers` that are not None);
+    NoRoomForWorkers otherwise, `workers[i]` left as it was.
 
     The room is checked again while the replacement is pending: a worker's death can reach the
     driver before Ray marks its node dead (a CI run here saw the replacement created 0.25 s
     before the node's death was known), so the first check may count a lost node's CPUs, and a
     replacement that fits nowhere would otherwise be waited for forever."""
+    with contextlib.suppress(Exception):
+        ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
+    needed, what = sum(w is not None for w in workers), f"replacing {kind} worker {i}"
     check_room(needed, cpus, what)
     actor = spawn()
     started = actor.node.remote()
@@ -236,16 +240,7 @@ def start_replacement(spawn, needed: int, cpus: float, what: str):
         except NoRoomForWorkers:
             ray.kill(actor)  # pending: it must not take a node's room when one joins
             raise
-    return actor
-
-
-def spawn_replacement(record: WorkerRecord, workers: list, i: int, cpus: float, spawn) -> None:
-    """Worker `i` replaced by `spawn()` when the live nodes have room for it beside the others;
-    NoRoomForWorkers otherwise (the caller's run stops, its checkpoint kept)."""
-    with contextlib.suppress(Exception):
-        ray.kill(workers[i])  # an unreachable one must not come back beside its replacement
-    workers[i] = start_replacement(spawn, len(workers), cpus,
-                                   f"replacing {record.kind} worker {i}")
+    workers[i] = actor
 
 
 # --- the object library through the object store ------------------------------------------

@@ -5,8 +5,6 @@ episodes), so playing it again on a new worker loses or doubles nothing."""
 
 from __future__ import annotations
 
-import contextlib
-
 import ray
 
 
@@ -18,7 +16,7 @@ def run_on_pool(spawn, workers: int, cpus: float, jobs: list, submit, done, name
     ("`describe(job)`") put first in the queue again, said in one line naming the `name`
     worker. When the live nodes have no room for the replacement (its node was lost), the
     others go on without it, said in one line; NoRoomForWorkers when none is left."""
-    from corn_drake.rl.workers.cluster import NoRoomForWorkers, death_reason, start_replacement
+    from corn_drake.rl.workers.cluster import NoRoomForWorkers, death_reason, spawn_replacement
 
     pool = [spawn() for _ in range(min(workers, len(jobs)))]
     pending, running = list(jobs), {}
@@ -35,20 +33,17 @@ def run_on_pool(spawn, workers: int, cpus: float, jobs: list, submit, done, name
             result = ray.get(ready[0])
         except (ray.exceptions.RayActorError, ray.exceptions.ActorUnavailableError) as error:
             pending.insert(0, job)
-            reason = death_reason(error)
-            alive = sum(w is not None for w in pool)
-            with contextlib.suppress(Exception):
-                ray.kill(pool[i])  # an unreachable one must not come back beside its replacement
+            said = f"{name} worker {i} died ({death_reason(error)})"
             try:
-                pool[i] = start_replacement(spawn, alive, cpus, f"replacing {name} worker {i}")
+                spawn_replacement(name, pool, i, cpus, spawn)
             except NoRoomForWorkers:
                 pool[i] = None
-                if alive == 1:
+                left = sum(w is not None for w in pool)
+                if not left:
                     raise
-                print(f"{name} worker {i} died ({reason}): no room for a replacement, "
-                      f"{describe(job)} goes to the other {alive - 1}", flush=True)
+                print(f"{said}: no room for a replacement, {describe(job)} goes to the other "
+                      f"{left}", flush=True)
                 continue
-            print(f"{name} worker {i} died ({reason}): {describe(job)} goes to a new worker",
-                  flush=True)
+            print(f"{said}: {describe(job)} goes to a new worker", flush=True)
             continue
         done(job, result)

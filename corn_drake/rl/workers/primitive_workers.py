@@ -119,7 +119,7 @@ class RayPrimitiveCollectors:
                     raise RuntimeError(f"primitive workers died {self._replaced_in_a_row} times "
                                        f"in a row without returning a round") from None
                 self.restarts += 1
-                spawn_replacement(self.record, self.workers, w, self.cpus,
+                spawn_replacement(self.record.kind, self.workers, w, self.cpus,
                                   lambda: self._spawn(w))
                 self.record.replaced(w, e, self.workers[w], "sending its request again")
                 self.submit(w, rounds, exploration)

@@ -172,7 +172,7 @@ class RayEnvBatch:
 
     def _replace(self, i: int, error: Exception) -> StepResult:
         self.restarts += 1
-        spawn_replacement(self.record, self.workers, i, self.cpus, lambda: self._spawn(i))
+        spawn_replacement(self.record.kind, self.workers, i, self.cpus, lambda: self._spawn(i))
         self.record.replaced(i, error, self.workers[i], "its envs starting new episodes")
         obs = ray.get(self.workers[i].reset.remote())
         E = self.envs_per_worker

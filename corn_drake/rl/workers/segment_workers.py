@@ -102,7 +102,7 @@ class RaySegmentCollectors:
                         raise RuntimeError(f"rollout workers died {replaced} times collecting "
                                            f"update {self.version}'s segments") from None
                     self.restarts += 1
-                    spawn_replacement(self.record, self.workers, i, self.cpus,
+                    spawn_replacement(self.record.kind, self.workers, i, self.cpus,
                                       lambda: self._spawn(i))
                     self.record.replaced(i, e, self.workers[i],
                                          f"collecting update {self.version}'s segment again")
