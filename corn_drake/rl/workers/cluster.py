@@ -39,7 +39,7 @@ joined_cluster = False
 # worker's start builds its envs, seconds on a busy core; a minute means it waits for room.
 PLACEMENT_NOTICE_S = 60.0
 
-# How often the room of a pending worker is checked again (placed, spawn_replacement): Ray
+# How often the room of a pending worker is checked again (wait_with_room): Ray
 # marks a lost node dead seconds after its workers' deaths are seen.
 ROOM_RECHECK_S = 2.0
 
@@ -124,6 +124,20 @@ def check_room(num_workers: int, cpus: float, what: str) -> None:
                                f"(ray start --address ... --num-cpus N) or run fewer --workers")
 
 
+def wait_with_room(refs: list, needed: int, cpus: float, what: str,
+                   waiting=lambda pending: None) -> None:
+    """Waits until every ref in `refs` is ready (the workers have started), checking every
+    ROOM_RECHECK_S that the live nodes still have room for `needed` workers of `cpus` CPUs
+    (NoRoomForWorkers naming `what` when not) and calling `waiting(pending refs)`: a node lost
+    while they are pending ends the wait instead of leaving it without end."""
+    while True:
+        _, pending = ray.wait(refs, num_returns=len(refs), timeout=ROOM_RECHECK_S)
+        if not pending:
+            return
+        check_room(needed, cpus, what)
+        waiting(pending)
+
+
 class WorkerBase:
     """What every worker kind answers besides its work: its process and its node."""
 
@@ -167,18 +181,17 @@ class WorkerRecord:
         is checked again while any is pending: a node lost meanwhile raises NoRoomForWorkers
         instead of a wait without end (spawn_replacement says why)."""
         refs = [a.node.remote() for a in actors]
-        start, noticed = time.monotonic(), False
-        while True:
-            _, pending = ray.wait(refs, num_returns=len(refs), timeout=ROOM_RECHECK_S)
-            if not pending:
-                break
-            check_room(len(actors), cpus, f"{self.kind} workers")
+        start, noticed = time.monotonic(), []
+
+        def notice(pending: list) -> None:
             if not noticed and time.monotonic() - start >= PLACEMENT_NOTICE_S:
                 free = ray.available_resources().get("CPU", 0.0)
                 print(f"{len(pending)} {self.kind} worker(s) not started after "
                       f"{PLACEMENT_NOTICE_S:.0f} s ({free:g} CPUs free in the Ray cluster, "
                       f"each worker asks {cpus:g}): still waiting", flush=True)
-                noticed = True
+                noticed.append(True)
+
+        wait_with_room(refs, len(actors), cpus, f"{self.kind} workers", notice)
         self.nodes = ray.get(refs)
 
     def replaced(self, i: int, error: Exception, actor, during: str) -> None:
@@ -233,13 +246,11 @@ def spawn_replacement(kind: str, workers: list, i: int, cpus: float, spawn) -> N
     needed, what = sum(w is not None for w in workers), f"replacing {kind} worker {i}"
     check_room(needed, cpus, what)
     actor = spawn()
-    started = actor.node.remote()
-    while not ray.wait([started], timeout=ROOM_RECHECK_S)[0]:
-        try:
-            check_room(needed, cpus, what)
-        except NoRoomForWorkers:
-            ray.kill(actor)  # pending: it must not take a node's room when one joins
-            raise
+    try:
+        wait_with_room([actor.node.remote()], needed, cpus, what)
+    except NoRoomForWorkers:
+        ray.kill(actor)  # pending: it must not take a node's room when one joins
+        raise
     workers[i] = actor
 
 
